@@ -1,0 +1,34 @@
+/// @file cli_common.h
+/// @brief Shared pieces of the voxwarp command line: progress on stderr, exit codes, option helpers.
+#pragma once
+
+#include <voxwarp/progress.h>
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <string>
+
+namespace voxwarp::cli {
+
+/// Exit codes, documented in the README.
+enum Exit : int { ok = 0, usage = 1, bad_input = 2, resource_limit = 3, solver_failure = 4, io_failure = 5, cancelled = 6, internal = 10 };
+
+/// Options every subcommand shares.
+struct Global {
+    bool quiet = false;
+};
+
+/// A progress callback printing "voxwarp: stage 40%" lines to stderr (throttled), or nothing when quiet.
+ProgressCallback stderr_progress(const Global& global);
+
+/// Print an informational line to stderr unless quiet.
+void note(const Global& global, const std::string& line);
+
+/// Each subcommand registers itself and sets the action run after parsing.
+using Action = std::function<void()>;
+void add_voxelize(CLI::App& app, Global& global, Action& action);
+void add_extract(CLI::App& app, Global& global, Action& action);
+void add_info(CLI::App& app, Global& global, Action& action);
+
+} // namespace voxwarp::cli

@@ -1,0 +1,45 @@
+#include "cli_common.h"
+
+#include <voxwarp/mesh_io.h>
+#include <voxwarp/vdb_io.h>
+#include <voxwarp/voxelize.h>
+
+#include <memory>
+
+namespace voxwarp::cli {
+
+void add_voxelize(CLI::App& app, Global& global, Action& action) {
+    struct Args {
+        std::string input, output, sign = "auto";
+        VoxelizeOptions options;
+        double max_memory_gib = 0;
+    };
+    auto args = std::make_shared<Args>();
+    auto* cmd = app.add_subcommand("voxelize", "Mesh -> antialiased density voxmap (.vdb, FloatGrid 'density', surface at 0.5)");
+    cmd->add_option("input", args->input, "Input mesh (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("-o,--output", args->output, "Output .vdb file")->required();
+    auto* res = cmd->add_option("-r,--resolution", args->options.resolution, "Voxels along the mesh's longest side")
+                    ->capture_default_str();
+    cmd->add_option("--voxel-size", args->options.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res);
+    cmd->add_option("--padding", args->options.padding_voxels, "Empty voxels around the mesh")->capture_default_str();
+    cmd->add_option("--sign", args->sign, "Inside/outside test: auto, flood-fill (watertight input) or winding-number (scans)")
+        ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
+        ->capture_default_str();
+    cmd->add_option("--max-memory", args->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
+    cmd->callback([args, &global, &action] {
+        action = [args, &global] {
+            auto& o = args->options;
+            o.sign = args->sign == "flood-fill" ? SignMethod::flood_fill
+                     : args->sign == "winding-number" ? SignMethod::winding_number : SignMethod::automatic;
+            o.max_memory_bytes = std::uint64_t(args->max_memory_gib * double(1ull << 30));
+            o.progress = stderr_progress(global);
+            const TriangleMesh mesh = read_mesh(args->input);
+            const Voxmap voxmap = voxelize(mesh, o);
+            write_vdb(voxmap, args->output);
+            note(global, "wrote " + args->output + ": " + std::to_string(voxmap.dims[0]) + "x" + std::to_string(voxmap.dims[1]) + "x" +
+                             std::to_string(voxmap.dims[2]) + " voxels of size " + std::to_string(voxmap.voxel_size));
+        };
+    });
+}
+
+} // namespace voxwarp::cli

@@ -1,0 +1,27 @@
+// Round trip mesh -> voxmap -> mesh (voxwarp) beside OpenVDB's plain mesh -> level set -> mesh, same run.
+#include "bench_common.h"
+
+#include <voxwarp/extract.h>
+#include <voxwarp/openvdb_baseline.h>
+#include <voxwarp/voxelize.h>
+
+#include <benchmark/benchmark.h>
+
+namespace voxwarp::bench {
+
+static void BM_RoundTripOpenVDB(benchmark::State& state) {
+    const TriangleMesh& bunny = bunny_mesh();
+    for (auto _ : state) benchmark::DoNotOptimize(openvdb_round_trip(bunny, int(state.range(0))));
+}
+BENCHMARK(BM_RoundTripOpenVDB)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+static void BM_RoundTrip(benchmark::State& state) {
+    const TriangleMesh& bunny = bunny_mesh();
+    for (auto _ : state) {
+        const Voxmap voxmap = voxelize(bunny, {.resolution = int(state.range(0))});
+        benchmark::DoNotOptimize(extract(voxmap));
+    }
+}
+BENCHMARK(BM_RoundTrip)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+} // namespace voxwarp::bench

@@ -1,0 +1,26 @@
+/// @file mesh_io.h
+/// @brief Mesh files in and out through OpenMesh's readers and writers (OBJ, OFF, PLY, STL, OM).
+#pragma once
+
+#include <voxwarp/triangle_mesh.h>
+
+#include <string>
+
+namespace voxwarp {
+
+/// Read a mesh file as a plain polygon list (polygons fan-triangulated), keeping every face even at
+/// non-manifold edges and vertices (OpenMesh's halfedge mesh would drop those).
+/// Positions are world units as stored in the file.
+/// @throw IOError when the file cannot be opened; InvalidInput when it is empty, unparsable, has
+///        non-finite coordinates, or faces that index outside the vertex list.
+TriangleMesh read_mesh(const std::string& path);
+
+/// Write a mesh (format by extension: .obj .off .ply .stl .om). Written to a temporary file beside
+/// `path` and renamed into place, so a failure never leaves a half-written or clobbered file.
+/// @throw InvalidInput for an unknown extension; IOError when writing fails.
+void write_mesh(const TriangleMesh& mesh, const std::string& path);
+
+/// True when the extension names a mesh format write_mesh/read_mesh understand.
+bool is_mesh_path(const std::string& path);
+
+} // namespace voxwarp

@@ -1,0 +1,57 @@
+/// @file triangle_mesh.h
+/// @brief A plain indexed polygon mesh (triangles and optional quads): voxwarp's currency between libraries.
+///
+/// Positions are in world units. Faces index into `vertices` (0-based) and are counter-clockwise seen from
+/// outside. The struct makes no manifoldness promise: a mesh read from a scan may be a triangle soup.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace voxwarp {
+
+struct TriangleMesh {
+    std::vector<Eigen::Vector3d> vertices;          ///< #V positions, world units
+    std::vector<std::array<std::int32_t, 3>> triangles; ///< #T vertex index triples
+    std::vector<std::array<std::int32_t, 4>> quads;     ///< #Q vertex index quadruples (extraction only)
+
+    std::size_t face_count() const { return triangles.size() + quads.size(); }
+    /// The same surface with every quad split into two triangles (along its shorter diagonal).
+    TriangleMesh triangulated() const;
+};
+
+/// Axis-aligned bounds of the vertices, world units. Empty mesh: min = +inf, max = -inf.
+struct Bounds {
+    Eigen::Vector3d min, max;
+    Eigen::Vector3d size() const { return max - min; }
+};
+Bounds bounds(const TriangleMesh& mesh);
+
+/// Topology facts a user checks first: is it a closed 2-manifold, what is its Euler characteristic.
+struct MeshTopology {
+    std::int64_t vertices = 0;           ///< vertices referenced by at least one face
+    std::int64_t edges = 0;              ///< distinct undirected edges
+    std::int64_t faces = 0;
+    std::int64_t boundary_edges = 0;     ///< edges with one incident face
+    std::int64_t nonmanifold_edges = 0;  ///< edges with three or more incident faces
+    std::int64_t nonmanifold_vertices = 0; ///< vertices whose incident faces form more than one fan
+    std::int64_t misoriented_edges = 0;  ///< two-face edges traversed in the same direction by both faces
+    std::int64_t degenerate_faces = 0;   ///< faces with a repeated vertex index
+    std::int64_t components = 0;         ///< connected components of faces (through shared vertices)
+    std::int64_t euler = 0;              ///< V - E + F
+    bool closed() const { return boundary_edges == 0; }
+    bool manifold() const { return nonmanifold_edges == 0 && nonmanifold_vertices == 0; }
+    bool oriented() const { return misoriented_edges == 0; }
+    /// Closed, manifold and consistently oriented: a watertight solid boundary.
+    bool watertight() const { return closed() && manifold() && oriented() && degenerate_faces == 0; }
+};
+MeshTopology topology(const TriangleMesh& mesh);
+
+/// Signed volume enclosed by a closed, outward-oriented mesh (divergence theorem), world units cubed.
+double enclosed_volume(const TriangleMesh& mesh);
+
+} // namespace voxwarp

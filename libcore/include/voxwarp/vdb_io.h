@@ -1,0 +1,26 @@
+/// @file vdb_io.h
+/// @brief Voxmaps in and out of OpenVDB .vdb files (for Houdini, Blender and OpenVDB's tools).
+///
+/// A voxmap is stored as a FloatGrid named "density" with class "fog volume": voxel values are the density
+/// in [0, 1], background 0, the grid's transform has the voxmap's voxel size and origin (voxel (0,0,0) of
+/// the voxmap is index (0,0,0) of the grid). Metadata: "voxwarp_density_convention" = "density in [0,1],
+/// surface at 0.5", "voxwarp_dims" (x, y, z counts). Reading accepts any float grid: a level set (class
+/// "level set") is converted to density with a one-voxel ramp on each side of its zero crossing.
+#pragma once
+
+#include <voxwarp/voxmap.h>
+
+#include <string>
+
+namespace voxwarp {
+
+/// Write `voxmap` to `path` (temp file + rename). @throw IOError on failure.
+void write_vdb(const Voxmap& voxmap, const std::string& path);
+
+/// Read the first float grid of a .vdb file (or the grid named `grid_name` when given) as a voxmap
+/// covering the grid's active bounding box (plus the stored dims when written by voxwarp).
+/// @throw IOError when the file cannot be opened; InvalidInput when it holds no float grid, the grid is
+///        empty, its transform is not a uniform scale + translation, or it holds non-finite values.
+Voxmap read_vdb(const std::string& path, const std::string& grid_name = {});
+
+} // namespace voxwarp

@@ -1,0 +1,30 @@
+#include <voxwarp/atomic_file.h>
+#include <voxwarp/errors.h>
+
+#include <filesystem>
+#include <random>
+#include <system_error>
+
+namespace voxwarp {
+
+void write_atomically(const std::string& path, const std::function<void(const std::string&)>& write) {
+    namespace fs = std::filesystem;
+    const fs::path target(path);
+    // The temporary keeps the target's extension: writers choose the format by it.
+    std::random_device rd;
+    const fs::path tmp = target.parent_path() /
+                         ("." + target.stem().string() + ".tmp" + std::to_string(rd() % 1000000) + target.extension().string());
+    try {
+        write(tmp.string());
+        std::error_code ec;
+        if (!fs::exists(tmp, ec)) throw IOError(path + ": the writer produced no file");
+        fs::rename(tmp, target, ec);
+        if (ec) throw IOError(path + ": cannot move the finished output into place: " + ec.message());
+    } catch (...) {
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        throw;
+    }
+}
+
+} // namespace voxwarp

@@ -1,0 +1,194 @@
+#include <voxwarp/atomic_file.h>
+#include <voxwarp/errors.h>
+#include <voxwarp/mesh_io.h>
+
+#include <OpenMesh/Core/IO/IOManager.hh>
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/IO/importer/BaseImporter.hh>
+#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace voxwarp {
+
+namespace mesh_io_internal {
+
+using namespace OpenMesh;
+
+/// Receives what OpenMesh's readers parse as a plain polygon list. Unlike ImporterT on a halfedge mesh it
+/// refuses nothing, so faces at non-manifold edges and vertices survive; problems are recorded, not printed.
+class SoupImporter final : public IO::BaseImporter {
+public:
+    TriangleMesh mesh;
+    std::string first_problem;
+    std::size_t polygon_count = 0;
+
+    VertexHandle add_vertex(const Vec3f& p) override { return add_vertex(Vec3d(p)); }
+    VertexHandle add_vertex(const Vec3d& p) override {
+        if (first_problem.empty() && !(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2])))
+            first_problem = "vertex " + std::to_string(mesh.vertices.size() + 1) + " has a non-finite coordinate";
+        mesh.vertices.emplace_back(p[0], p[1], p[2]);
+        return VertexHandle(int(mesh.vertices.size() - 1));
+    }
+    VertexHandle add_vertex() override { return add_vertex(Vec3d(0, 0, 0)); }
+    FaceHandle add_face(const VHandles& ids) override {
+        ++polygon_count;
+        const auto face_no = std::to_string(polygon_count);
+        if (ids.size() < 3) {
+            note("face " + face_no + " has " + std::to_string(ids.size()) + " vertices, expected at least 3");
+            return FaceHandle();
+        }
+        for (const auto& vh : ids)
+            if (!vh.is_valid() || vh.idx() >= int(mesh.vertices.size())) {
+                note("face " + face_no + " refers to vertex " + std::to_string(vh.idx() + 1) + ", file has " +
+                     std::to_string(mesh.vertices.size()) + " vertices");
+                return FaceHandle();
+            }
+        for (std::size_t c = 1; c + 1 < ids.size(); ++c)
+            mesh.triangles.push_back({ids[0].idx(), ids[c].idx(), ids[c + 1].idx()});
+        return FaceHandle(int(polygon_count - 1));
+    }
+    void note(std::string problem) {
+        if (first_problem.empty()) first_problem = std::move(problem);
+    }
+
+    // What a plain polygon list has no use for.
+    HalfedgeHandle add_edge(VertexHandle, VertexHandle) override { return HalfedgeHandle(); }
+    FaceHandle add_face(HalfedgeHandle) override { return FaceHandle(); }
+    void add_face_texcoords(FaceHandle, VertexHandle, const std::vector<Vec2f>&) override {}
+    void add_face_texcoords(FaceHandle, VertexHandle, const std::vector<Vec3f>&) override {}
+    void set_face_texindex(FaceHandle, int) override {}
+    void set_point(VertexHandle vh, const Vec3f& p) override {
+        if (vh.is_valid() && vh.idx() < int(mesh.vertices.size())) mesh.vertices[vh.idx()] = Eigen::Vector3d(p[0], p[1], p[2]);
+    }
+    void set_halfedge(VertexHandle, HalfedgeHandle) override {}
+    void set_normal(VertexHandle, const Vec3f&) override {}
+    void set_normal(VertexHandle, const Vec3d&) override {}
+    void set_color(VertexHandle, const Vec3uc&) override {}
+    void set_color(VertexHandle, const Vec4uc&) override {}
+    void set_color(VertexHandle, const Vec3f&) override {}
+    void set_color(VertexHandle, const Vec4f&) override {}
+    void set_texcoord(VertexHandle, const Vec2f&) override {}
+    void set_status(VertexHandle, const Attributes::StatusInfo&) override {}
+    void set_next(HalfedgeHandle, HalfedgeHandle) override {}
+    void set_face(HalfedgeHandle, FaceHandle) override {}
+    void request_face_texcoords2D() override {}
+    void set_texcoord(HalfedgeHandle, const Vec2f&) override {}
+    void set_texcoord(VertexHandle, const Vec3f&) override {}
+    void set_texcoord(HalfedgeHandle, const Vec3f&) override {}
+    void set_status(HalfedgeHandle, const Attributes::StatusInfo&) override {}
+    void set_color(EdgeHandle, const Vec3uc&) override {}
+    void set_color(EdgeHandle, const Vec4uc&) override {}
+    void set_color(EdgeHandle, const Vec3f&) override {}
+    void set_color(EdgeHandle, const Vec4f&) override {}
+    void set_status(EdgeHandle, const Attributes::StatusInfo&) override {}
+    void set_normal(FaceHandle, const Vec3f&) override {}
+    void set_normal(FaceHandle, const Vec3d&) override {}
+    void set_color(FaceHandle, const Vec3uc&) override {}
+    void set_color(FaceHandle, const Vec4uc&) override {}
+    void set_color(FaceHandle, const Vec3f&) override {}
+    void set_color(FaceHandle, const Vec4f&) override {}
+    void set_status(FaceHandle, const Attributes::StatusInfo&) override {}
+    void add_texture_information(int, std::string) override {}
+    size_t n_vertices() const override { return mesh.vertices.size(); }
+    size_t n_faces() const override { return polygon_count; }
+    size_t n_edges() const override { return 0; }
+};
+
+struct DoubleTraits : DefaultTraits {
+    using Point = Vec3d;
+    using Normal = Vec3d;
+};
+using OutputMesh = PolyMesh_ArrayKernelT<DoubleTraits>;
+
+std::string lower_extension(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+
+/// OpenMesh's readers and writers report through omerr/omlog; library code must not print.
+struct QuietOpenMesh {
+    QuietOpenMesh() {
+        omerr().disable();
+        omlog().disable();
+        omout().disable();
+    }
+};
+
+} // namespace mesh_io_internal
+
+using namespace mesh_io_internal;
+
+bool is_mesh_path(const std::string& path) {
+    const auto ext = lower_extension(path);
+    return ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" || ext == ".om";
+}
+
+TriangleMesh read_mesh(const std::string& path) {
+    static QuietOpenMesh quiet;
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    if (!fs::exists(path, ec)) throw IOError(path + ": no such file");
+    if (fs::is_directory(path, ec)) throw IOError(path + ": is a directory, expected a mesh file");
+    if (!is_mesh_path(path))
+        throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
+    if (std::ifstream probe(path, std::ios::binary); !probe) throw IOError(path + ": cannot open for reading");
+    if (fs::file_size(path, ec) == 0) throw InvalidInput(path + ": file is empty");
+
+    SoupImporter importer;
+    IO::Options options;
+    if (lower_extension(path) == ".om") {
+        // The OM reader rebuilds halfedge connectivity, so it needs a real halfedge mesh behind it.
+        OutputMesh om;
+        if (!IO::read_mesh(om, path)) throw InvalidInput(path + ": cannot parse as an OpenMesh .om file");
+        for (auto v : om.vertices()) importer.add_vertex(om.point(v));
+        for (auto f : om.faces()) {
+            IO::BaseImporter::VHandles ids;
+            for (auto v : om.fv_range(f)) ids.push_back(v);
+            importer.add_face(ids);
+        }
+    } else if (!IO::IOManager().read(path, importer, options)) {
+        throw InvalidInput(path + ": cannot parse as a " + lower_extension(path).substr(1) + " mesh" +
+                           (importer.first_problem.empty() ? "" : ": " + importer.first_problem));
+    }
+    if (!importer.first_problem.empty()) throw InvalidInput(path + ": " + importer.first_problem);
+    if (importer.mesh.vertices.empty()) throw InvalidInput(path + ": no vertices");
+    if (importer.mesh.triangles.empty()) throw InvalidInput(path + ": no faces");
+    return std::move(importer.mesh);
+}
+
+void write_mesh(const TriangleMesh& mesh, const std::string& path) {
+    static QuietOpenMesh quiet;
+    if (!is_mesh_path(path))
+        throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
+    OutputMesh om;
+    om.reserve(mesh.vertices.size(), 3 * mesh.face_count() / 2, mesh.face_count());
+    std::vector<OutputMesh::VertexHandle> handles;
+    handles.reserve(mesh.vertices.size());
+    for (const auto& v : mesh.vertices) handles.push_back(om.add_vertex(OutputMesh::Point(v.x(), v.y(), v.z())));
+    auto add = [&](const auto& face) {
+        std::vector<OutputMesh::VertexHandle> ids;
+        for (auto i : face) ids.push_back(handles[std::size_t(i)]);
+        if (om.add_face(ids).is_valid()) return;
+        // A face OpenMesh's halfedge structure refuses (non-manifold spot, e.g. a vertex-mode deform of a scan)
+        // is written on its own copies of its vertices: the geometry is kept, the file stays readable.
+        for (auto& h : ids) h = om.add_vertex(om.point(h));
+        om.add_face(ids);
+    };
+    for (const auto& t : mesh.triangles) add(t);
+    for (const auto& q : mesh.quads) add(q);
+
+    const bool binary = lower_extension(path) == ".stl" || lower_extension(path) == ".om";
+    IO::Options options = binary ? IO::Options(IO::Options::Binary) : IO::Options();
+    write_atomically(path, [&](const std::string& tmp) {
+        if (!IO::write_mesh(om, tmp, options, 10)) throw IOError(path + ": writing the mesh failed");
+    });
+}
+
+} // namespace voxwarp

@@ -1,0 +1,51 @@
+#include <voxwarp/errors.h>
+#include <voxwarp/resources.h>
+
+#include <sys/resource.h>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace voxwarp {
+
+std::uint64_t available_memory_bytes() {
+    std::ifstream meminfo("/proc/meminfo");
+    std::string key;
+    std::uint64_t kib = 0;
+    std::string unit;
+    while (meminfo >> key >> kib >> unit)
+        if (key == "MemAvailable:") return kib * 1024;
+    return 0;
+}
+
+std::uint64_t peak_resident_bytes() {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return std::uint64_t(usage.ru_maxrss) * 1024; // Linux reports KiB
+}
+
+std::string format_bytes(std::uint64_t bytes) {
+    const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+    double value = double(bytes);
+    int u = 0;
+    while (value >= 1024 && u < 4) value /= 1024, ++u;
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, u == 0 ? "%.0f %s" : "%.2f %s", value, units[u]);
+    return buffer;
+}
+
+void require_memory(std::uint64_t bytes, std::uint64_t limit_bytes, const std::string& what) {
+    std::uint64_t limit = limit_bytes;
+    const char* source = "--max-memory";
+    if (limit == 0) {
+        limit = available_memory_bytes() / 10 * 9;
+        source = "90% of available memory";
+        if (limit == 0) return; // unknown: nothing to check against
+    }
+    if (bytes > limit)
+        throw ResourceLimit(what + " needs about " + format_bytes(bytes) + ", more than the limit of " + format_bytes(limit) +
+                            " (" + source + "); lower the resolution or raise --max-memory");
+}
+
+} // namespace voxwarp

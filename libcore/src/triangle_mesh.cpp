@@ -1,0 +1,135 @@
+#include <voxwarp/triangle_mesh.h>
+
+#include <algorithm>
+#include <limits>
+#include <numeric>
+#include <unordered_map>
+
+namespace voxwarp {
+
+TriangleMesh TriangleMesh::triangulated() const {
+    TriangleMesh out;
+    out.vertices = vertices;
+    out.triangles = triangles;
+    out.triangles.reserve(triangles.size() + 2 * quads.size());
+    for (const auto& q : quads) {
+        const double d02 = (vertices[q[0]] - vertices[q[2]]).squaredNorm();
+        const double d13 = (vertices[q[1]] - vertices[q[3]]).squaredNorm();
+        if (d02 <= d13) {
+            out.triangles.push_back({q[0], q[1], q[2]});
+            out.triangles.push_back({q[0], q[2], q[3]});
+        } else {
+            out.triangles.push_back({q[0], q[1], q[3]});
+            out.triangles.push_back({q[1], q[2], q[3]});
+        }
+    }
+    return out;
+}
+
+Bounds bounds(const TriangleMesh& mesh) {
+    Bounds b{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()),
+             Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
+    for (const auto& v : mesh.vertices) {
+        b.min = b.min.cwiseMin(v);
+        b.max = b.max.cwiseMax(v);
+    }
+    return b;
+}
+
+namespace {
+
+struct UnionFind {
+    std::vector<std::int64_t> parent;
+    explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
+    std::int64_t find(std::int64_t x) {
+        while (parent[x] != x) x = parent[x] = parent[parent[x]];
+        return x;
+    }
+    void unite(std::int64_t a, std::int64_t b) { parent[find(a)] = find(b); }
+};
+
+} // namespace
+
+MeshTopology topology(const TriangleMesh& input) {
+    const TriangleMesh mesh = input.quads.empty() ? TriangleMesh{} : input.triangulated();
+    const auto& tris = input.quads.empty() ? input.triangles : mesh.triangles;
+    const std::size_t nv = input.vertices.size();
+    MeshTopology t;
+    t.faces = std::int64_t(input.face_count());
+
+    // Undirected edge -> (count, signed direction sum). A consistently oriented interior edge is walked
+    // once in each direction, so its direction sum is zero.
+    struct EdgeInfo {
+        int count = 0;
+        int direction = 0;
+    };
+    std::unordered_map<std::uint64_t, EdgeInfo> edges;
+    edges.reserve(tris.size() * 2);
+    std::vector<char> used(nv, 0);
+    UnionFind faces_uf(tris.size());
+    std::vector<std::int64_t> vertex_face(nv, -1);
+    for (std::size_t f = 0; f < tris.size(); ++f) {
+        const auto& tri = tris[f];
+        if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) ++t.degenerate_faces;
+        for (int c = 0; c < 3; ++c) {
+            const std::uint32_t a = std::uint32_t(tri[c]), b = std::uint32_t(tri[(c + 1) % 3]);
+            used[a] = 1;
+            if (vertex_face[a] >= 0) faces_uf.unite(std::int64_t(f), vertex_face[a]);
+            vertex_face[a] = std::int64_t(f);
+            if (a == b) continue;
+            const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
+            auto& e = edges[key];
+            ++e.count;
+            e.direction += a < b ? 1 : -1;
+        }
+    }
+    t.vertices = std::count(used.begin(), used.end(), 1);
+    t.edges = std::int64_t(edges.size());
+    for (const auto& [key, e] : edges) {
+        if (e.count == 1) ++t.boundary_edges;
+        if (e.count > 2) ++t.nonmanifold_edges;
+        if (e.count == 2 && e.direction != 0) ++t.misoriented_edges;
+    }
+    t.euler = t.vertices - t.edges + t.faces;
+
+    std::vector<char> root_seen(tris.size(), 0);
+    for (std::size_t f = 0; f < tris.size(); ++f) {
+        const auto r = faces_uf.find(std::int64_t(f));
+        if (!root_seen[r]) root_seen[r] = 1, ++t.components;
+    }
+
+    // A manifold vertex's incident faces form one fan: faces around it, linked through the edges they share
+    // at the vertex, make a single connected group.
+    std::vector<std::vector<std::uint32_t>> incident(nv);
+    for (std::size_t f = 0; f < tris.size(); ++f)
+        for (int c = 0; c < 3; ++c) incident[tris[f][c]].push_back(std::uint32_t(f));
+    for (std::size_t v = 0; v < nv; ++v) {
+        const auto& fs = incident[v];
+        if (fs.size() < 2) continue;
+        UnionFind fan(fs.size());
+        std::unordered_map<std::int32_t, std::size_t> first_with_neighbour;
+        for (std::size_t a = 0; a < fs.size(); ++a)
+            for (int c = 0; c < 3; ++c) {
+                const std::int32_t w = tris[fs[a]][c];
+                if (w == std::int32_t(v)) continue;
+                auto [it, inserted] = first_with_neighbour.try_emplace(w, a);
+                if (!inserted) fan.unite(std::int64_t(a), std::int64_t(it->second));
+            }
+        std::int64_t groups = 0;
+        for (std::size_t a = 0; a < fs.size(); ++a)
+            if (fan.find(std::int64_t(a)) == std::int64_t(a)) ++groups;
+        if (groups > 1) ++t.nonmanifold_vertices;
+    }
+    return t;
+}
+
+double enclosed_volume(const TriangleMesh& input) {
+    const TriangleMesh tri = input.quads.empty() ? TriangleMesh{} : input.triangulated();
+    const auto& tris = input.quads.empty() ? input.triangles : tri.triangles;
+    double six_volume = 0;
+    for (const auto& t : tris)
+        six_volume += input.vertices[t[0]].dot(input.vertices[t[1]].cross(input.vertices[t[2]]));
+    return six_volume / 6.0;
+}
+
+} // namespace voxwarp

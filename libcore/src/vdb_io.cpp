@@ -1,0 +1,62 @@
+#include <voxwarp/atomic_file.h>
+#include <voxwarp/errors.h>
+#include <voxwarp/resources.h>
+#include <voxwarp/vdb_io.h>
+
+#include <voxwarp_internal/vdb_convert.h>
+
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+
+#include <filesystem>
+
+namespace voxwarp {
+
+void write_vdb(const Voxmap& voxmap, const std::string& path) {
+    openvdb::initialize();
+    auto grid = vdb_internal::to_density_grid(voxmap);
+    grid->setName("density");
+    grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+    grid->insertMeta("voxwarp_density_convention", openvdb::StringMetadata("density in [0,1], surface at 0.5"));
+    grid->insertMeta("voxwarp_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(int(voxmap.dims[0]), int(voxmap.dims[1]), int(voxmap.dims[2]))));
+    write_atomically(path, [&](const std::string& tmp) {
+        try {
+            openvdb::io::File file(tmp);
+            file.write({grid});
+            file.close();
+        } catch (const openvdb::Exception& e) {
+            throw IOError(path + ": writing failed: " + e.what());
+        }
+    });
+}
+
+Voxmap read_vdb(const std::string& path, const std::string& grid_name) {
+    openvdb::initialize();
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec)) throw IOError(path + ": no such file");
+    if (std::filesystem::file_size(path, ec) == 0) throw InvalidInput(path + ": file is empty");
+    openvdb::GridPtrVecPtr grids;
+    try {
+        openvdb::io::File file(path);
+        file.open();
+        grids = file.getGrids();
+        file.close();
+    } catch (const openvdb::Exception& e) {
+        throw InvalidInput(path + ": not a readable .vdb file: " + e.what());
+    } catch (const std::exception& e) {
+        throw InvalidInput(path + ": not a readable .vdb file: " + e.what());
+    }
+    openvdb::FloatGrid::Ptr grid;
+    for (const auto& base : *grids) {
+        if (!grid_name.empty() && base->getName() != grid_name) continue;
+        if (auto g = openvdb::gridPtrCast<openvdb::FloatGrid>(base)) {
+            grid = g;
+            break;
+        }
+    }
+    if (!grid)
+        throw InvalidInput(path + (grid_name.empty() ? ": holds no float grid" : ": holds no float grid named '" + grid_name + "'"));
+    return vdb_internal::from_float_grid(*grid, path);
+}
+
+} // namespace voxwarp

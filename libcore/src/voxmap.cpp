@@ -1,0 +1,52 @@
+#include <voxwarp/errors.h>
+#include <voxwarp/voxmap.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <cmath>
+#include <string>
+
+namespace voxwarp {
+
+Voxmap::Voxmap(std::array<std::int64_t, 3> d, const Eigen::Vector3d& o, double h) : dims(d), origin(o), voxel_size(h) {
+    for (int a = 0; a < 3; ++a)
+        if (dims[a] <= 0) throw InvalidInput("voxmap: dimension " + std::to_string(a) + " is " + std::to_string(dims[a]) + ", expected > 0");
+    if (!(h > 0) || !std::isfinite(h)) throw InvalidInput("voxmap: voxel size " + std::to_string(h) + ", expected a finite value > 0");
+    density.assign(std::size_t(voxel_count()), 0.0f);
+}
+
+float Voxmap::sample(const Eigen::Vector3d& p) const {
+    const double fx = std::floor(p.x()), fy = std::floor(p.y()), fz = std::floor(p.z());
+    const std::int64_t i0 = std::int64_t(fx), j0 = std::int64_t(fy), k0 = std::int64_t(fz);
+    const double tx = p.x() - fx, ty = p.y() - fy, tz = p.z() - fz;
+    auto value = [&](std::int64_t i, std::int64_t j, std::int64_t k) -> double {
+        if (i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2]) return 0.0;
+        return at(i, j, k);
+    };
+    double result = 0;
+    for (int dk = 0; dk < 2; ++dk)
+        for (int dj = 0; dj < 2; ++dj)
+            for (int di = 0; di < 2; ++di) {
+                const double w = (di ? tx : 1 - tx) * (dj ? ty : 1 - ty) * (dk ? tz : 1 - tz);
+                if (w != 0) result += w * value(i0 + di, j0 + dj, k0 + dk);
+            }
+    return float(result);
+}
+
+double enclosed_volume(const Voxmap& voxmap) {
+    const double sum = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), 0.0,
+        [&](const tbb::blocked_range<std::size_t>& r, double acc) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) acc += voxmap.density[i];
+            return acc;
+        },
+        [](double a, double b) { return a + b; });
+    return sum * voxmap.voxel_size * voxmap.voxel_size * voxmap.voxel_size;
+}
+
+std::uint64_t voxmap_bytes(const std::array<std::int64_t, 3>& dims) {
+    return std::uint64_t(dims[0]) * std::uint64_t(dims[1]) * std::uint64_t(dims[2]) * sizeof(float);
+}
+
+} // namespace voxwarp

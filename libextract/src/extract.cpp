@@ -1,0 +1,42 @@
+#include <voxwarp/errors.h>
+#include <voxwarp/extract.h>
+#include <voxwarp_internal/vdb_convert.h>
+
+#include <openvdb/tools/VolumeToMesh.h>
+
+#include <string>
+
+namespace voxwarp {
+
+TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options) {
+    if (!(options.isovalue > 0 && options.isovalue < 1))
+        throw InvalidInput("extract: isovalue " + std::to_string(options.isovalue) + " is outside (0, 1)");
+    if (!(options.adaptivity >= 0 && options.adaptivity <= 1))
+        throw InvalidInput("extract: adaptivity " + std::to_string(options.adaptivity) + " is outside [0, 1]");
+    openvdb::initialize();
+    Progress progress(options.progress, "extract");
+    progress.report(0.0);
+    const auto grid = vdb_internal::to_density_grid(voxmap);
+    progress.report(0.3);
+
+    std::vector<openvdb::Vec3s> points;
+    std::vector<openvdb::Vec3I> triangles;
+    std::vector<openvdb::Vec4I> quads;
+    openvdb::tools::volumeToMesh(*grid, points, triangles, quads, options.isovalue, options.adaptivity);
+    progress.report(0.9);
+
+    // OpenVDB counts values below the isovalue as inside (level-set convention); for density, inside is
+    // above it, so every face comes out wound inwards: reverse them.
+    TriangleMesh mesh;
+    mesh.vertices.resize(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) mesh.vertices[i] = Eigen::Vector3d(points[i][0], points[i][1], points[i][2]);
+    mesh.triangles.reserve(triangles.size());
+    for (const auto& t : triangles) mesh.triangles.push_back({std::int32_t(t[0]), std::int32_t(t[2]), std::int32_t(t[1])});
+    mesh.quads.reserve(quads.size());
+    for (const auto& q : quads) mesh.quads.push_back({std::int32_t(q[0]), std::int32_t(q[3]), std::int32_t(q[2]), std::int32_t(q[1])});
+    if (!options.quads) mesh = mesh.triangulated();
+    progress.report(1.0);
+    return mesh;
+}
+
+} // namespace voxwarp

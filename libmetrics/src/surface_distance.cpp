@@ -1,0 +1,111 @@
+#include <voxwarp/errors.h>
+#include <voxwarp/surface_distance.h>
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+namespace voxwarp {
+
+namespace surface_distance_internal {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = Kernel::Point_3;
+using Triangle = Kernel::Triangle_3;
+using Iterator = std::vector<Triangle>::const_iterator;
+using Primitive = CGAL::AABB_triangle_primitive<Kernel, Iterator>;
+using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
+
+std::vector<Triangle> cgal_triangles(const TriangleMesh& mesh) {
+    const TriangleMesh tri = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
+    const auto& faces = mesh.quads.empty() ? mesh.triangles : tri.triangles;
+    std::vector<Triangle> out;
+    out.reserve(faces.size());
+    auto p = [&](std::int32_t i) { return Point(mesh.vertices[i].x(), mesh.vertices[i].y(), mesh.vertices[i].z()); };
+    for (const auto& f : faces) {
+        Triangle t(p(f[0]), p(f[1]), p(f[2]));
+        if (!t.is_degenerate()) out.push_back(t);
+    }
+    return out;
+}
+
+std::vector<Eigen::Vector3d> sample(const TriangleMesh& mesh, const SurfaceDistanceOptions& options) {
+    const TriangleMesh tri = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
+    const auto& faces = mesh.quads.empty() ? mesh.triangles : tri.triangles;
+    std::vector<Eigen::Vector3d> points;
+    std::vector<char> used(mesh.vertices.size(), 0);
+    for (const auto& f : faces)
+        for (auto i : f) used[std::size_t(i)] = 1;
+    for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
+        if (used[i]) points.push_back(mesh.vertices[i]);
+    std::vector<double> cumulative(faces.size());
+    double total = 0;
+    for (std::size_t i = 0; i < faces.size(); ++i) {
+        const auto& f = faces[i];
+        total += 0.5 * (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]).norm();
+        cumulative[i] = total;
+    }
+    if (total <= 0) return points;
+    std::mt19937_64 rng(options.seed);
+    std::uniform_real_distribution<double> uniform(0.0, 1.0);
+    for (std::size_t s = 0; s < options.samples; ++s) {
+        const auto it = std::lower_bound(cumulative.begin(), cumulative.end(), uniform(rng) * total);
+        const auto& f = faces[std::size_t(std::min<std::ptrdiff_t>(it - cumulative.begin(), std::ptrdiff_t(faces.size()) - 1))];
+        double u = uniform(rng), v = uniform(rng);
+        if (u + v > 1) u = 1 - u, v = 1 - v;
+        points.push_back(mesh.vertices[f[0]] + u * (mesh.vertices[f[1]] - mesh.vertices[f[0]]) + v * (mesh.vertices[f[2]] - mesh.vertices[f[0]]));
+    }
+    return points;
+}
+
+std::vector<double> distances(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& to) {
+    const auto triangles = cgal_triangles(to);
+    if (triangles.empty()) throw InvalidInput("surface distance: the mesh measured against has no non-degenerate faces");
+    Tree tree(triangles.begin(), triangles.end());
+    tree.accelerate_distance_queries();
+    std::vector<double> d(points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i)
+            d[i] = std::sqrt(tree.squared_distance(Point(points[i].x(), points[i].y(), points[i].z())));
+    });
+    return d;
+}
+
+DistanceStats summarise(std::vector<double> d) {
+    DistanceStats s;
+    s.samples = d.size();
+    if (d.empty()) return s;
+    s.mean = std::accumulate(d.begin(), d.end(), 0.0) / double(d.size());
+    const std::size_t k = std::min(d.size() - 1, std::size_t(0.99 * double(d.size())));
+    std::nth_element(d.begin(), d.begin() + std::ptrdiff_t(k), d.end());
+    s.p99 = d[k];
+    s.max = *std::max_element(d.begin(), d.end());
+    return s;
+}
+
+} // namespace surface_distance_internal
+
+using namespace surface_distance_internal;
+
+DistanceStats one_sided_distance(const TriangleMesh& from, const TriangleMesh& to, const SurfaceDistanceOptions& options) {
+    if (from.face_count() == 0 || to.face_count() == 0) throw InvalidInput("surface distance: a mesh has no faces");
+    return summarise(distances(sample(from, options), to));
+}
+
+DistanceStats symmetric_distance(const TriangleMesh& a, const TriangleMesh& b, const SurfaceDistanceOptions& options) {
+    if (a.face_count() == 0 || b.face_count() == 0) throw InvalidInput("surface distance: a mesh has no faces");
+    auto d = distances(sample(a, options), b);
+    auto e = distances(sample(b, options), a);
+    d.insert(d.end(), e.begin(), e.end());
+    return summarise(std::move(d));
+}
+
+} // namespace voxwarp

@@ -1,0 +1,57 @@
+/// @file voxelize.h
+/// @brief Mesh -> antialiased voxmap (density in [0, 1], surface at 0.5), robust to open and non-manifold scans.
+///
+/// The density is a linear ramp of the signed distance to the surface: density = 0.5 - d / (2 * ramp * h),
+/// clamped to [0, 1], with d > 0 outside (world units). Along every voxel edge that crosses the surface both
+/// ends lie within one voxel of it, so with ramp >= 1 the 0.5 crossing interpolated between voxel centres
+/// lands exactly where the surface crosses that edge (for a locally flat surface).
+///
+/// Inside/outside: a watertight, consistently oriented mesh is signed by OpenVDB's level-set construction;
+/// anything else (holes, non-manifold edges, inconsistent orientation) by the generalized winding number
+/// thresholded at 0.5, which closes small holes with a minimal-looking cap and ignores stray triangles.
+/// Open sheets and parts thinner than about a voxel enclose no volume and vanish from the voxmap.
+#pragma once
+
+#include <voxwarp/progress.h>
+#include <voxwarp/triangle_mesh.h>
+#include <voxwarp/voxmap.h>
+
+#include <cstdint>
+
+namespace voxwarp {
+
+/// How voxelize decides which voxels are inside.
+enum class SignMethod {
+    automatic,      ///< flood_fill for watertight oriented meshes, winding_number otherwise
+    flood_fill,     ///< OpenVDB meshToLevelSet: fast, exact for watertight input, leaks through holes
+    winding_number, ///< generalized winding number >= 0.5: robust to holes and non-manifold spots
+};
+
+struct VoxelizeOptions {
+    int resolution = 128;         ///< voxels along the mesh's longest bounding-box side (used when voxel_size <= 0)
+    double voxel_size = 0;        ///< h in world units; > 0 overrides resolution
+    int padding_voxels = 3;       ///< empty voxels between the mesh's bounds and the voxmap border (>= ramp + 1)
+    double ramp_voxels = 1.0;     ///< half-width of the antialiasing ramp across the surface, voxels (>= 1 exact for flat surfaces)
+    SignMethod sign = SignMethod::automatic;
+    std::uint64_t max_memory_bytes = 0; ///< refuse requests estimated above this; 0 = 90 % of available memory
+    ProgressCallback progress;          ///< optional progress / cancel
+};
+
+/// Voxel size and grid that voxelize would use for this mesh and these options (no heavy work).
+/// @throw InvalidInput for an empty mesh, non-finite coordinates, a resolution outside [4, 8192], a
+///        non-positive voxel size, or a grid with more than 2^31 voxels along an axis.
+Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
+
+/// Estimated peak bytes voxelize needs for this mesh and these options.
+std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
+
+/// Sign method `automatic` resolves to for this mesh.
+SignMethod resolve_sign_method(const TriangleMesh& mesh);
+
+/// Voxelize a mesh (world units) into an antialiased voxmap whose voxel (0,0,0) centre sits padding_voxels
+/// voxels below the mesh's minimum corner. Parallel (oneTBB).
+/// @throw InvalidInput (see voxelize_frame), ResourceLimit when the estimate exceeds the memory limit,
+///        Cancelled when the progress callback returns false.
+Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
+
+} // namespace voxwarp

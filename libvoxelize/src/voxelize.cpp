@@ -1,0 +1,272 @@
+#include <voxwarp/errors.h>
+#include <voxwarp/resources.h>
+#include <voxwarp/voxelize.h>
+#include <voxwarp/winding_number.h>
+#include <voxwarp_internal/vdb_convert.h>
+
+#include <openvdb/tools/Dense.h>
+#include <openvdb/tools/MeshToVolume.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+
+namespace voxwarp {
+
+namespace voxelize_internal {
+
+void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    if (mesh.vertices.empty() || mesh.face_count() == 0) throw InvalidInput("voxelize: the mesh has no faces");
+    for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
+        if (!mesh.vertices[i].allFinite()) throw InvalidInput("voxelize: vertex " + std::to_string(i) + " has a non-finite coordinate");
+    if (options.voxel_size <= 0 && (options.resolution < 4 || options.resolution > 8192))
+        throw InvalidInput("voxelize: resolution " + std::to_string(options.resolution) + " is outside [4, 8192]");
+    if (options.voxel_size < 0 || !std::isfinite(options.voxel_size))
+        throw InvalidInput("voxelize: voxel size " + std::to_string(options.voxel_size) + " must be a finite value > 0");
+    if (options.ramp_voxels < 0.5 || options.ramp_voxels > 16)
+        throw InvalidInput("voxelize: ramp of " + std::to_string(options.ramp_voxels) + " voxels is outside [0.5, 16]");
+    if (options.padding_voxels < int(std::ceil(options.ramp_voxels)) + 1 || options.padding_voxels > 1 << 20)
+        throw InvalidInput("voxelize: padding of " + std::to_string(options.padding_voxels) + " voxels must be at least ramp + 1 = " +
+                           std::to_string(int(std::ceil(options.ramp_voxels)) + 1));
+}
+
+/// Bounds of the faces that have area: zero-area stray triangles (common in scans) enclose nothing and
+/// would otherwise stretch the grid, and with it the voxel size a --resolution gives.
+Bounds solid_bounds(const TriangleMesh& mesh) {
+    const TriangleMesh triangulated = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
+    const auto& faces = mesh.quads.empty() ? mesh.triangles : triangulated.triangles;
+    TriangleMesh with_area;
+    with_area.vertices = mesh.vertices;
+    for (const auto& f : faces)
+        if ((mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]).squaredNorm() > 0) with_area.triangles.push_back(f);
+    if (with_area.triangles.empty()) return bounds(mesh);
+    Bounds b{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
+    for (const auto& f : with_area.triangles)
+        for (auto v : f) b.min = b.min.cwiseMin(mesh.vertices[v]), b.max = b.max.cwiseMax(mesh.vertices[v]);
+    return b;
+}
+
+std::vector<openvdb::Vec3s> vdb_points(const TriangleMesh& mesh) {
+    std::vector<openvdb::Vec3s> points(mesh.vertices.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+        points[i] = openvdb::Vec3s(float(mesh.vertices[i].x()), float(mesh.vertices[i].y()), float(mesh.vertices[i].z()));
+    return points;
+}
+
+std::vector<openvdb::Vec3I> vdb_triangles(const TriangleMesh& mesh) {
+    const TriangleMesh tri = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
+    const auto& source = mesh.quads.empty() ? mesh.triangles : tri.triangles;
+    std::vector<openvdb::Vec3I> triangles(source.size());
+    for (std::size_t i = 0; i < triangles.size(); ++i)
+        triangles[i] = openvdb::Vec3I(openvdb::Index32(source[i][0]), openvdb::Index32(source[i][1]), openvdb::Index32(source[i][2]));
+    return triangles;
+}
+
+/// Narrow-band unsigned distance (world units) whose voxels are then signed, negative inside, by the
+/// generalized winding number. Off-band voxels are left at the positive background for fill_off_band().
+openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const WindingNumber& winding, double orientation,
+                                            const openvdb::math::Transform& xform, float half_width, Progress& progress) {
+    vdb_internal::ProgressInterrupter interrupter{&progress};
+    progress.stage("unsigned distance");
+    auto grid = openvdb::tools::meshToUnsignedDistanceField<openvdb::FloatGrid>(interrupter, xform, vdb_points(mesh), vdb_triangles(mesh),
+                                                                                 {}, half_width);
+    progress.check();
+    progress.stage("winding number");
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    std::vector<LeafT*> leaves;
+    grid->tree().getNodes(leaves);
+    std::atomic<std::size_t> done{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 16), [&](const auto& r) {
+        if (progress.cancelled()) return;
+        for (std::size_t l = r.begin(); l != r.end(); ++l)
+            for (auto it = leaves[l]->beginValueOn(); it; ++it) {
+                const auto w = xform.indexToWorld(it.getCoord());
+                if (orientation * winding(Eigen::Vector3d(w[0], w[1], w[2])) >= 0.5) it.setValue(-it.getValue());
+            }
+        progress.poll(double(done += r.size()) / double(leaves.size()));
+    });
+    progress.check();
+    return grid;
+}
+
+/// Sign the voxels off the narrow band (value >= background). The winding number is harmonic off the
+/// surface, so it is sampled on a coarse lattice (every `spacing` voxels) and a voxel whose eight lattice
+/// corners all lie clearly on one side (|w - 0.5| > 0.25) takes that side; only the others are evaluated
+/// exactly. A flood fill cannot do this job: on a scan the inside and outside are one region through the holes.
+/// `phi` is the dense signed distance, x fastest.
+void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, double orientation, Progress& progress) {
+    constexpr std::int64_t spacing = 4;
+    const auto [nx, ny, nz] = phi.dims;
+    const std::int64_t cx = (nx - 1) / spacing + 2, cy = (ny - 1) / spacing + 2, cz = (nz - 1) / spacing + 2;
+    std::vector<float> coarse(std::size_t(cx * cy * cz));
+    progress.stage("inside/outside");
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, cz), [&](const auto& r) {
+        if (progress.cancelled()) return;
+        for (std::int64_t k = r.begin(); k != r.end(); ++k)
+            for (std::int64_t j = 0; j < cy; ++j)
+                for (std::int64_t i = 0; i < cx; ++i)
+                    coarse[std::size_t(i + cx * (j + cy * k))] =
+                        float(orientation * winding(phi.world(double(i * spacing), double(j * spacing), double(k * spacing))));
+    });
+    progress.report(0.5);
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
+        if (progress.cancelled()) return;
+        for (std::int64_t k = r.begin(); k != r.end(); ++k)
+            for (std::int64_t j = 0; j < ny; ++j)
+                for (std::int64_t i = 0; i < nx; ++i) {
+                    float& value = phi.density[std::size_t(phi.index(i, j, k))];
+                    if (value < background) continue;
+                    const std::int64_t ci = i / spacing, cj = j / spacing, ck = k / spacing;
+                    int votes_in = 0, votes_out = 0;
+                    for (int c = 0; c < 8; ++c) {
+                        const float w = coarse[std::size_t((ci + (c & 1)) + cx * ((cj + ((c >> 1) & 1)) + cy * (ck + (c >> 2))))];
+                        votes_in += w > 0.75f;
+                        votes_out += w < 0.25f;
+                    }
+                    bool inside;
+                    if (votes_in == 8)
+                        inside = true;
+                    else if (votes_out == 8)
+                        inside = false;
+                    else
+                        inside = orientation * winding(phi.world(double(i), double(j), double(k))) >= 0.5;
+                    value = inside ? -background : background;
+                }
+    });
+    progress.report(1.0);
+}
+
+/// Keep walls thinner than a voxel. Where such a wall passes between two neighbouring voxel centres
+/// without containing either, both read as outside and the wall would vanish there, leaving a tunnel. For
+/// every such edge (both ends outside and within a voxel of the surface, midpoint inside) both ends are
+/// made inside, with the signed distance that puts their outward crossing, interpolated to the next voxel
+/// out, exactly at the wall's face: phi = -u (1 + u) / (1 - u) voxels, u = the end's distance to the face.
+/// The wall then comes out about a voxel thick, its outer faces in place. Returns the voxels changed.
+std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, double orientation, Progress& progress) {
+    const double h = phi.voxel_size;
+    const auto [nx, ny, nz] = phi.dims;
+    const std::array<std::int64_t, 3> stride{1, nx, nx * ny};
+    std::vector<float> replacement(phi.density.size(), 0.0f);
+    auto inside_value = [h](float value) {
+        const double u = std::min(0.9, double(value) / h);
+        return float(-h * u * (1 + u) / (1 - u));
+    };
+    progress.stage("thin walls");
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
+        if (progress.cancelled()) return;
+        for (std::int64_t k = r.begin(); k != r.end(); ++k)
+            for (std::int64_t j = 0; j < ny; ++j)
+                for (std::int64_t i = 0; i < nx; ++i) {
+                    const std::int64_t a = phi.index(i, j, k);
+                    const float pa = phi.density[std::size_t(a)];
+                    if (!(pa > 0 && pa < h)) continue;
+                    const std::array<bool, 3> has_next{i + 1 < nx, j + 1 < ny, k + 1 < nz};
+                    for (int axis = 0; axis < 3; ++axis) {
+                        if (!has_next[std::size_t(axis)]) continue;
+                        const std::int64_t b = a + stride[std::size_t(axis)];
+                        const float pb = phi.density[std::size_t(b)];
+                        if (!(pb > 0 && pb < h && pa + pb < h)) continue;
+                        Eigen::Vector3d mid = phi.world(double(i), double(j), double(k));
+                        mid[axis] += 0.5 * h;
+                        if (orientation * winding(mid) < 0.5) continue;
+                        // Two slabs may claim one voxel; both write the same kind of value (its own), so the race is benign.
+                        replacement[std::size_t(a)] = inside_value(pa);
+                        replacement[std::size_t(b)] = inside_value(pb);
+                    }
+                }
+    });
+    progress.check();
+    std::int64_t changed = 0;
+    for (std::size_t v = 0; v < replacement.size(); ++v)
+        if (replacement[v] < 0) phi.density[v] = replacement[v], ++changed;
+    return changed;
+}
+
+} // namespace voxelize_internal
+
+using namespace voxelize_internal;
+
+Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    validate(mesh, options);
+    const Bounds b = solid_bounds(mesh);
+    const double longest = b.size().maxCoeff();
+    const double h = options.voxel_size > 0 ? options.voxel_size : longest / options.resolution;
+    if (!(h > 0)) throw InvalidInput("voxelize: the mesh has zero extent; give --voxel-size");
+    std::array<std::int64_t, 3> dims{};
+    for (int a = 0; a < 3; ++a) {
+        const double count = std::ceil(b.size()[a] / h) + 1 + 2.0 * options.padding_voxels;
+        if (!(count < double(1 << 30)))
+            throw InvalidInput("voxelize: voxel size " + std::to_string(h) + " gives " + std::to_string(count) + " voxels along axis " +
+                               std::to_string(a) + ", more than 2^30");
+        dims[std::size_t(a)] = std::int64_t(count);
+    }
+    Voxmap frame;
+    frame.dims = dims;
+    frame.voxel_size = h;
+    frame.origin = b.min - Eigen::Vector3d::Constant(options.padding_voxels * h);
+    return frame;
+}
+
+std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    const Voxmap frame = voxelize_frame(mesh, options);
+    // The dense density plus the sparse narrow band (about a 7-voxel shell of the surface, ~16 bytes a voxel
+    // with tree overhead) plus the mesh's own copies.
+    const double h = frame.voxel_size;
+    double area = 0;
+    for (const auto& t : mesh.triangles)
+        area += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
+    const double band = (area / (h * h)) * (2 * (options.ramp_voxels + 2)) * 16.0;
+    return voxmap_bytes(frame.dims) + std::uint64_t(band) + mesh.vertices.size() * 64 + mesh.face_count() * 64;
+}
+
+SignMethod resolve_sign_method(const TriangleMesh& mesh) { return topology(mesh).watertight() ? SignMethod::flood_fill : SignMethod::winding_number; }
+
+Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    openvdb::initialize();
+    Voxmap voxmap = voxelize_frame(mesh, options);
+    require_memory(voxelize_memory_estimate(mesh, options), options.max_memory_bytes,
+                   "voxelizing at " + std::to_string(voxmap.dims[0]) + "x" + std::to_string(voxmap.dims[1]) + "x" + std::to_string(voxmap.dims[2]));
+    Progress progress(options.progress, "level set");
+    const auto xform = vdb_internal::voxmap_transform(voxmap);
+    const float half_width = float(options.ramp_voxels + 1.5);
+    const SignMethod method = options.sign == SignMethod::automatic ? resolve_sign_method(mesh) : options.sign;
+
+    voxmap.density.resize(std::size_t(voxmap.voxel_count()));
+    using DenseT = openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ>;
+    const openvdb::CoordBBox box(openvdb::Coord(0, 0, 0),
+                                 openvdb::Coord(int(voxmap.dims[0] - 1), int(voxmap.dims[1] - 1), int(voxmap.dims[2] - 1)));
+    DenseT dense(box, voxmap.density.data());
+    if (method == SignMethod::flood_fill) {
+        vdb_internal::ProgressInterrupter interrupter{&progress};
+        const auto level_set = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupter, *xform, vdb_points(mesh), vdb_triangles(mesh),
+                                                                                   std::vector<openvdb::Vec4I>{}, half_width);
+        progress.check();
+        openvdb::tools::copyToDense(*level_set, dense);
+    } else {
+        const TriangleMesh triangulated = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
+        const TriangleMesh& soup = mesh.quads.empty() ? mesh : triangulated;
+        // A mesh whose faces mostly point inwards would read as inside-out; flip the winding number for it.
+        const double orientation = enclosed_volume(soup) < 0 ? -1.0 : 1.0;
+        const WindingNumber winding(soup);
+        const auto band = winding_number_band(soup, winding, orientation, *xform, half_width, progress);
+        openvdb::tools::copyToDense(*band, dense);
+        sign_off_band(voxmap, band->background(), winding, orientation, progress);
+        keep_thin_walls(voxmap, winding, orientation, progress);
+    }
+
+    progress.stage("density");
+    const float scale = float(0.5 / (options.ramp_voxels * voxmap.voxel_size));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const float d = 0.5f - voxmap.density[i] * scale;
+            voxmap.density[i] = d < 0 ? 0.0f : (d > 1 ? 1.0f : d);
+        }
+    });
+    progress.report(1.0);
+    return voxmap;
+}
+
+} // namespace voxwarp

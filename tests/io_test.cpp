@@ -1,0 +1,95 @@
+#include "test_helpers.h"
+
+#include <voxwarp/errors.h>
+#include <voxwarp/mesh_io.h>
+#include <voxwarp/vdb_io.h>
+#include <voxwarp/voxelize.h>
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace voxwarp {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct TempDir {
+    fs::path path;
+    TempDir() : path(fs::temp_directory_path() / ("voxwarp_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter()++))) {
+        fs::create_directories(path);
+    }
+    ~TempDir() { fs::remove_all(path); }
+    std::string file(const std::string& name) const { return (path / name).string(); }
+    static int& counter() {
+        static int c = 0;
+        return c;
+    }
+};
+
+TEST(MeshIO, ReadsTheBunnyAsAClosedSolid) {
+    const TriangleMesh bunny = read_mesh(test::data_path("bunny.obj"));
+    EXPECT_EQ(bunny.vertices.size(), 1839u);
+    EXPECT_EQ(bunny.triangles.size(), 3674u);
+    EXPECT_TRUE(topology(bunny).watertight());
+    EXPECT_EQ(topology(bunny).euler, 2);
+}
+
+TEST(MeshIO, KeepsFacesAtNonManifoldEdgesOfTheScan) {
+    const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
+    EXPECT_EQ(scan.triangles.size(), 37629u);
+    EXPECT_EQ(topology(scan).nonmanifold_edges, 88);
+}
+
+TEST(MeshIO, WriteReadPreservesEveryFormat) {
+    TempDir dir;
+    const TriangleMesh sphere = test::sphere_mesh({0.25, 0, 0}, 1.0, 2);
+    for (const std::string ext : {".obj", ".off", ".ply", ".stl"}) {
+        const std::string path = dir.file("sphere" + ext);
+        write_mesh(sphere, path);
+        const TriangleMesh back = read_mesh(path);
+        EXPECT_EQ(back.triangles.size(), sphere.triangles.size()) << ext;
+        EXPECT_NEAR(enclosed_volume(back), enclosed_volume(sphere), 1e-5) << ext;
+    }
+}
+
+TEST(MeshIO, BadFilesNameTheProblem) {
+    TempDir dir;
+    auto write = [&](const std::string& name, const std::string& text) {
+        std::ofstream(dir.file(name)) << text;
+        return dir.file(name);
+    };
+    EXPECT_THROW(read_mesh(dir.file("missing.obj")), IOError);
+    EXPECT_THROW(read_mesh(write("empty.obj", "")), InvalidInput);
+    EXPECT_THROW(read_mesh(write("nofaces.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n")), InvalidInput);
+    try {
+        read_mesh(write("badindex.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n"));
+        FAIL() << "expected InvalidInput";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("badindex.obj"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(read_mesh(write("mesh.xyz", "1 2 3\n")), InvalidInput);
+}
+
+TEST(VdbIO, WriteThenReadIsLossless) {
+    TempDir dir;
+    const Voxmap voxmap = voxelize(test::torus_mesh({0, 0, 0}, 1.0, 0.4, 120, 60), {.resolution = 32});
+    const std::string path = dir.file("torus.vdb");
+    write_vdb(voxmap, path);
+    const Voxmap back = read_vdb(path);
+    ASSERT_EQ(back.dims, voxmap.dims);
+    EXPECT_DOUBLE_EQ(back.voxel_size, voxmap.voxel_size);
+    EXPECT_NEAR((back.origin - voxmap.origin).norm(), 0.0, 1e-12);
+    EXPECT_EQ(back.density, voxmap.density);
+}
+
+TEST(VdbIO, RejectsFilesWithoutAFloatGrid) {
+    TempDir dir;
+    std::ofstream(dir.file("junk.vdb")) << "this is not a vdb file";
+    EXPECT_THROW(read_vdb(dir.file("junk.vdb")), InvalidInput);
+    EXPECT_THROW(read_vdb(dir.file("none.vdb")), IOError);
+}
+
+} // namespace
+} // namespace voxwarp

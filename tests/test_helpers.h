@@ -1,0 +1,109 @@
+/// @file test_helpers.h
+/// @brief Shared fixtures: analytic shapes as fine meshes with their exact distance functions, data paths.
+#pragma once
+
+#include <voxwarp/triangle_mesh.h>
+
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <string>
+#include <utility>
+
+namespace voxwarp::test {
+
+inline std::string data_path(const std::string& name) { return std::string(VOXWARP_DATA_DIR) + "/" + name; }
+
+/// Icosphere: an icosahedron subdivided `levels` times and projected onto the sphere.
+inline TriangleMesh sphere_mesh(const Eigen::Vector3d& centre, double radius, int levels) {
+    const double t = (1.0 + std::sqrt(5.0)) / 2.0;
+    TriangleMesh m;
+    for (auto v : {Eigen::Vector3d(-1, t, 0), Eigen::Vector3d(1, t, 0), Eigen::Vector3d(-1, -t, 0), Eigen::Vector3d(1, -t, 0),
+                   Eigen::Vector3d(0, -1, t), Eigen::Vector3d(0, 1, t), Eigen::Vector3d(0, -1, -t), Eigen::Vector3d(0, 1, -t),
+                   Eigen::Vector3d(t, 0, -1), Eigen::Vector3d(t, 0, 1), Eigen::Vector3d(-t, 0, -1), Eigen::Vector3d(-t, 0, 1)})
+        m.vertices.push_back(v.normalized());
+    m.triangles = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
+                   {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},   {4, 9, 5}, {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+    for (int l = 0; l < levels; ++l) {
+        std::map<std::pair<int, int>, int> mid;
+        auto midpoint = [&](int a, int b) {
+            auto key = std::minmax(a, b);
+            auto it = mid.find(key);
+            if (it != mid.end()) return it->second;
+            m.vertices.push_back((m.vertices[a] + m.vertices[b]).normalized());
+            return mid[key] = int(m.vertices.size() - 1);
+        };
+        std::vector<std::array<std::int32_t, 3>> next;
+        for (const auto& f : m.triangles) {
+            const int a = midpoint(f[0], f[1]), b = midpoint(f[1], f[2]), c = midpoint(f[2], f[0]);
+            next.push_back({f[0], a, c});
+            next.push_back({f[1], b, a});
+            next.push_back({f[2], c, b});
+            next.push_back({a, b, c});
+        }
+        m.triangles = std::move(next);
+    }
+    for (auto& v : m.vertices) v = centre + radius * v;
+    return m;
+}
+
+/// Torus around the z axis: major radius R, minor radius r, nu x nv quads split into triangles.
+inline TriangleMesh torus_mesh(const Eigen::Vector3d& centre, double R, double r, int nu, int nv) {
+    TriangleMesh m;
+    for (int i = 0; i < nu; ++i)
+        for (int j = 0; j < nv; ++j) {
+            const double u = 2 * std::numbers::pi * i / nu, v = 2 * std::numbers::pi * j / nv;
+            m.vertices.push_back(centre + Eigen::Vector3d((R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u), r * std::sin(v)));
+        }
+    auto id = [&](int i, int j) { return std::int32_t(((i + nu) % nu) * nv + (j + nv) % nv); };
+    for (int i = 0; i < nu; ++i)
+        for (int j = 0; j < nv; ++j) {
+            m.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+            m.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+        }
+    return m;
+}
+
+inline double torus_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& centre, double R, double r) {
+    const Eigen::Vector3d q = p - centre;
+    return std::hypot(std::hypot(q.x(), q.y()) - R, q.z()) - r;
+}
+
+/// Axis-aligned box [lo, hi], each face an n x n grid of quads split into triangles, outward oriented.
+inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n) {
+    TriangleMesh m;
+    std::map<std::array<int, 3>, int> ids;
+    auto vertex = [&](std::array<int, 3> g) {
+        auto it = ids.find(g);
+        if (it != ids.end()) return it->second;
+        Eigen::Vector3d p;
+        for (int a = 0; a < 3; ++a) p[a] = lo[a] + (hi[a] - lo[a]) * g[std::size_t(a)] / n;
+        m.vertices.push_back(p);
+        return ids[g] = int(m.vertices.size() - 1);
+    };
+    for (int axis = 0; axis < 3; ++axis)
+        for (int side = 0; side < 2; ++side) {
+            const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+            for (int i = 0; i < n; ++i)
+                for (int j = 0; j < n; ++j) {
+                    auto g = [&](int di, int dj) {
+                        std::array<int, 3> c{};
+                        c[std::size_t(axis)] = side * n;
+                        c[std::size_t(u)] = i + di;
+                        c[std::size_t(v)] = j + dj;
+                        return vertex(c);
+                    };
+                    const int a = g(0, 0), b = g(1, 0), c = g(1, 1), d = g(0, 1);
+                    if (side == 1) {
+                        m.triangles.push_back({a, b, c});
+                        m.triangles.push_back({a, c, d});
+                    } else {
+                        m.triangles.push_back({a, c, b});
+                        m.triangles.push_back({a, d, c});
+                    }
+                }
+        }
+    return m;
+}
+
+} // namespace voxwarp::test

@@ -1,0 +1,45 @@
+#include "test_helpers.h"
+
+#include <voxwarp/winding_number.h>
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace voxwarp {
+namespace {
+
+TEST(WindingNumber, ClosedSphereIsOneInsideZeroOutside) {
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 3);
+    const WindingNumber w(sphere);
+    // The exact sum is 1 inside and 0 outside to rounding; the hierarchy within its far-field error.
+    EXPECT_NEAR(w.exact({0, 0, 0}), 1.0, 1e-9);
+    EXPECT_NEAR(w.exact({1.5, 0, 0}), 0.0, 1e-9);
+    EXPECT_NEAR(w({0, 0, 0}), 1.0, 0.03);
+    EXPECT_NEAR(w({0.5, 0.3, -0.2}), 1.0, 0.03);
+    EXPECT_NEAR(w({1.5, 0, 0}), 0.0, 0.03);
+    EXPECT_NEAR(w({10, -20, 5}), 0.0, 1e-3);
+}
+
+TEST(WindingNumber, HierarchyMatchesExactSum) {
+    TriangleMesh hemisphere = test::sphere_mesh({0, 0, 0}, 1.0, 4);
+    // Cut the sphere open: keep the faces above z = -0.3, a hole the winding number must bridge.
+    std::vector<std::array<std::int32_t, 3>> kept;
+    for (const auto& f : hemisphere.triangles)
+        if (hemisphere.vertices[f[0]].z() > -0.3) kept.push_back(f);
+    hemisphere.triangles = kept;
+    const WindingNumber w(hemisphere);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1.5, 1.5);
+    double worst = 0;
+    for (int i = 0; i < 2000; ++i) {
+        const Eigen::Vector3d q(u(rng), u(rng), u(rng));
+        worst = std::max(worst, std::abs(w(q) - w.exact(q)));
+    }
+    EXPECT_LE(worst, 0.03);
+    // Near the middle of the open sphere the surface still surrounds most directions.
+    EXPECT_GT(w({0, 0, 0.2}), 0.5);
+}
+
+} // namespace
+} // namespace voxwarp
