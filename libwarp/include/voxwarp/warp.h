@@ -1,0 +1,95 @@
+/// @file warp.h
+/// @brief The volume warp (True & Hughes 1992, sections 3-7): push a domain voxmap forward through a lattice
+///        into a target voxmap, with box filtering, fast tabulated evaluation and incremental updates.
+///
+/// Frames: the *domain* voxmap is aligned with the lattice's regions: domain voxel (e, f, g) sits at parameter
+/// (e / Gx, f / Gy, g / Gz), G = granularity per axis (voxels per region edge, an integer). The *target*
+/// voxmap is in world space with the domain's voxel size, its grid aligned with the input voxmap's, and covers
+/// the warped domain.
+///
+/// Filtering (paper section 6): every target voxel a domain voxel's image overlaps receives weight = overlap
+/// volume / voxel volume and weighted value = weight * density; finally density = wv if weight < 1 else
+/// wv / weight. The image is approximated by the bounding box of the parallelepiped spanned by the mapped
+/// central differences, each overlap scaled by |det| / box volume (the paper's box of six face centres loses a
+/// quarter of the density under a 30 degree rotation; this one deposits each voxel's image volume exactly and
+/// equals the paper's box for translations and axis scalings). Weights are accumulated in
+/// 64-bit fixed point (2^-32), so sums do not depend on order: the result is the same for any thread count,
+/// and an incremental update (subtract a region's old contribution, add its new one) is bit-identical to a
+/// full recompute.
+#pragma once
+
+#include <voxwarp/lattice.h>
+#include <voxwarp/progress.h>
+#include <voxwarp/voxmap.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+
+namespace voxwarp {
+
+/// What the user chooses about the lattice; everything else (granularity, domain size) follows from the voxmap.
+struct LatticeSpec {
+    std::array<int, 3> size{9, 9, 9};       ///< control points per axis (>= 4 uniform, >= 6 clamped); the papers' default 9^3
+    Placement placement = Placement::uniform;
+    double padding = 0.25;                  ///< uniform: the lattice reaches this fraction of the data's extent beyond it on each side
+};
+
+/// A domain voxmap aligned with a lattice's regions, ready to warp.
+struct WarpDomain {
+    Voxmap voxmap;                     ///< density at parameter (e/Gx, f/Gy, g/Gz); origin/voxel_size = its undeformed world frame
+    Lattice lattice;                   ///< the undeformed lattice
+    std::array<int, 3> granularity{};  ///< G per axis: domain voxels per region edge
+    Eigen::Vector3d target_origin;     ///< a world point on the target grid (the input voxmap's voxel (0,0,0) centre)
+    double target_voxel_size = 1;      ///< target voxel size, world units (the input's)
+};
+
+/// Build the domain for a voxmap. Uniform placement: the input is copied, zero-padded, into a grid of
+/// G * (n - 3) voxels per axis aligned with the input's voxels (no resampling: the undeformed warp is the
+/// identity). Clamped placement: the input is *captured* (pulled back through the undeformed clamped map,
+/// paper section 5) into a domain of about twice the input's resolution per axis.
+/// @throw InvalidInput for an empty voxmap or a bad spec; ResourceLimit when the domain would exceed max_memory_bytes
+///        (0 = 90 % of available memory).
+WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64_t max_memory_bytes = 0);
+
+struct WarpOptions {
+    bool preview = false; ///< the paper's "map and round off": each voxel centre lands in one target voxel (fast, aliased)
+    ProgressCallback progress;
+};
+
+/// Full warp of a domain through `lattice` (the domain's lattice, with moved control points) into a target voxmap
+/// covering the warped domain. Parallel (oneTBB), deterministic. @throw Cancelled, ResourceLimit.
+Voxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options = {});
+
+/// The same warp computed the slow, obvious way: the 64-term basis sum evaluated directly at every voxel, no
+/// tables, one thread. For tests and the BM_WarpNaive benchmark only.
+Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice);
+
+/// A warp in progress (paper section 7's main loop): precompute once, then move control points and read the
+/// target back. Each move re-splats only the <= 4^3 regions the point supports.
+class Warp {
+public:
+    /// Splats the whole domain once through `lattice` (usually domain.lattice).
+    Warp(WarpDomain domain, const Lattice& lattice, const WarpOptions& options = {});
+    ~Warp();
+    Warp(Warp&&) noexcept;
+    Warp& operator=(Warp&&) noexcept;
+
+    /// Move control point (i, j, k) to `position` (world units) and update the target incrementally.
+    /// If the moved regions now reach outside the target's bounds, the target grows and is recomputed in full.
+    /// @throw InvalidInput for an index outside the lattice or a non-finite position.
+    void move_control_point(int i, int j, int k, const Eigen::Vector3d& position);
+
+    const Lattice& lattice() const;
+    const WarpDomain& domain() const;
+    /// The target voxmap as it stands now.
+    Voxmap target() const;
+
+private:
+    Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options);
+    friend Voxmap warp(const WarpDomain&, const Lattice&, const WarpOptions&);
+    struct State;
+    std::unique_ptr<State> state_;
+};
+
+} // namespace voxwarp

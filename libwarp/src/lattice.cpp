@@ -1,0 +1,152 @@
+#include <voxwarp/basis.h>
+#include <voxwarp/errors.h>
+#include <voxwarp/lattice.h>
+
+#include <Eigen/LU>
+
+#include <cmath>
+
+namespace voxwarp {
+
+std::string to_string(Placement placement) { return placement == Placement::uniform ? "uniform" : "clamped"; }
+
+Placement placement_from_string(const std::string& name) {
+    if (name == "uniform") return Placement::uniform;
+    if (name == "clamped") return Placement::clamped;
+    throw InvalidInput("placement '" + name + "': expected \"uniform\" or \"clamped\"");
+}
+
+namespace {
+
+void check_size(const std::array<int, 3>& size, int minimum) {
+    for (int a = 0; a < 3; ++a)
+        if (size[std::size_t(a)] < minimum || size[std::size_t(a)] > 1024)
+            throw InvalidInput("lattice size " + std::to_string(size[std::size_t(a)]) + " along axis " + std::to_string(a) + " is outside [" +
+                               std::to_string(minimum) + ", 1024]");
+    const double count = double(size[0]) * size[1] * size[2];
+    if (count > 16.0 * 1024 * 1024) throw InvalidInput("lattice of " + std::to_string(std::int64_t(count)) + " control points is more than 16 M");
+}
+
+/// Region index and local parameter for one axis; the closed far end belongs to the last region.
+inline int region_of(double s, int regions, double& t) {
+    int a = int(std::floor(s));
+    if (a < 0) a = 0;
+    if (a > regions - 1) a = regions - 1;
+    t = s - a;
+    return a;
+}
+
+} // namespace
+
+Lattice Lattice::uniform(const std::array<int, 3>& size, const Eigen::Vector3d& origin, const Eigen::Vector3d& spacing) {
+    check_size(size, 4);
+    if (!origin.allFinite() || !spacing.allFinite() || (spacing.array() <= 0).any())
+        throw InvalidInput("uniform lattice: spacing must be finite and > 0");
+    Lattice l;
+    l.size_ = size;
+    l.placement_ = Placement::uniform;
+    l.origin_ = origin;
+    l.spacing_ = spacing;
+    l.points_.resize(std::size_t(size[0]) * size[1] * size[2]);
+    for (int k = 0; k < size[2]; ++k)
+        for (int j = 0; j < size[1]; ++j)
+            for (int i = 0; i < size[0]; ++i)
+                l.points_[l.flat_index(i, j, k)] = origin + Eigen::Vector3d((i - 1) * spacing.x(), (j - 1) * spacing.y(), (k - 1) * spacing.z());
+    l.rest_points_ = l.points_;
+    return l;
+}
+
+Lattice Lattice::clamped(const std::array<int, 3>& size, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+    check_size(size, 6);
+    if (!lo.allFinite() || !hi.allFinite() || ((hi - lo).array() <= 0).any()) throw InvalidInput("clamped lattice: the data box is empty");
+    Lattice l;
+    l.size_ = size;
+    l.placement_ = Placement::clamped;
+    l.origin_ = lo;
+    for (int a = 0; a < 3; ++a) l.spacing_[a] = (hi[a] - lo[a]) / (size[std::size_t(a)] - 3);
+    auto coordinate = [&](int a, int i) {
+        const int n = size[std::size_t(a)];
+        const int m = std::clamp(i - 2, 0, n - 5); // 0 .. n-5 over the n-4 distinct positions
+        return lo[a] + (hi[a] - lo[a]) * m / (n - 5);
+    };
+    l.points_.resize(std::size_t(size[0]) * size[1] * size[2]);
+    for (int k = 0; k < size[2]; ++k)
+        for (int j = 0; j < size[1]; ++j)
+            for (int i = 0; i < size[0]; ++i) l.points_[l.flat_index(i, j, k)] = Eigen::Vector3d(coordinate(0, i), coordinate(1, j), coordinate(2, k));
+    l.rest_points_ = l.points_;
+    return l;
+}
+
+void Lattice::weights(const Eigen::Vector3d& stu, std::array<int, 3>& region, std::array<double, 64>& w) const {
+    std::array<std::array<double, 4>, 3> b;
+    for (int a = 0; a < 3; ++a) {
+        double t;
+        region[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
+        b[std::size_t(a)] = cubic_basis(t);
+    }
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) w[std::size_t(i + 4 * (j + 4 * k))] = b[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)];
+}
+
+Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {
+    std::array<int, 3> r;
+    std::array<double, 64> w;
+    weights(stu, r, w);
+    Eigen::Vector3d p = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) p += w[std::size_t(i + 4 * (j + 4 * k))] * point(r[0] + i, r[1] + j, r[2] + k);
+    return p;
+}
+
+Eigen::Matrix3d Lattice::jacobian(const Eigen::Vector3d& stu) const {
+    std::array<int, 3> r;
+    std::array<std::array<double, 4>, 3> b, d;
+    for (int a = 0; a < 3; ++a) {
+        double t;
+        r[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
+        b[std::size_t(a)] = cubic_basis(t);
+        d[std::size_t(a)] = cubic_basis_derivative(t);
+    }
+    Eigen::Matrix3d J = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) {
+                const Eigen::Vector3d& p = point(r[0] + i, r[1] + j, r[2] + k);
+                J.col(0) += d[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)] * p;
+                J.col(1) += b[0][std::size_t(i)] * d[1][std::size_t(j)] * b[2][std::size_t(k)] * p;
+                J.col(2) += b[0][std::size_t(i)] * b[1][std::size_t(j)] * d[2][std::size_t(k)] * p;
+            }
+    return J;
+}
+
+bool Lattice::contains_parameter(const Eigen::Vector3d& stu, double tolerance) const {
+    for (int a = 0; a < 3; ++a)
+        if (stu[a] < -tolerance || stu[a] > size_[std::size_t(a)] - 3 + tolerance) return false;
+    return true;
+}
+
+Eigen::Vector3d Lattice::parameter_of(const Eigen::Vector3d& world) const {
+    const bool undeformed = points_ == rest_points_;
+    Eigen::Vector3d stu = (world - origin_).cwiseQuotient(spacing_);
+    if (undeformed && placement_ == Placement::uniform) return stu;
+    const double scale = Eigen::Vector3d(size_[0] - 3, size_[1] - 3, size_[2] - 3).maxCoeff();
+    for (int iteration = 0; iteration < 100; ++iteration) {
+        const Eigen::Vector3d residual = evaluate(stu) - world;
+        const Eigen::Matrix3d J = jacobian(stu);
+        // Clamped ends have a zero derivative; a tiny diagonal keeps the step finite there.
+        Eigen::Vector3d step = (J + 1e-12 * J.norm() * Eigen::Matrix3d::Identity()).fullPivLu().solve(residual);
+        if (!step.allFinite()) break;
+        const double limit = 0.5; // at most half a region per step keeps Newton inside one polynomial piece
+        if (step.cwiseAbs().maxCoeff() > limit) step *= limit / step.cwiseAbs().maxCoeff();
+        stu -= step;
+        if (step.norm() < 1e-12 * scale) return stu;
+    }
+    const Eigen::Vector3d residual = evaluate(stu) - world;
+    if (residual.norm() <= 1e-9 * (spacing_.norm() * scale)) return stu;
+    throw SolverFailure("lattice: cannot find the parameter of world point (" + std::to_string(world.x()) + ", " + std::to_string(world.y()) + ", " +
+                        std::to_string(world.z()) + "): Newton did not converge (the map may fold there)");
+}
+
+} // namespace voxwarp

@@ -1,0 +1,86 @@
+// The slow, obvious warp: 64-term basis sum per voxel, no tables, one thread, double accumulators.
+// The yardstick for the fast one (tests compare them; BM_WarpNaive times it).
+#include <voxwarp/basis.h>
+#include <voxwarp/warp.h>
+
+#include <cmath>
+
+namespace voxwarp {
+
+Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
+    const auto& dm = domain.voxmap;
+    const double h = domain.target_voxel_size;
+    const auto regions = lattice.regions();
+    // Each voxel is mapped with its own region's polynomial; its face neighbours too (extrapolated at the
+    // region's edge), as the fast path does, so both compute the same map.
+    auto map = [&](const std::array<std::int64_t, 3>& idx, const std::array<int, 3>& region) {
+        std::array<std::array<double, 4>, 3> b;
+        for (std::size_t a = 0; a < 3; ++a) b[a] = cubic_basis(double(idx[a] - std::int64_t(region[a]) * domain.granularity[a]) / domain.granularity[a]);
+        Eigen::Vector3d p = Eigen::Vector3d::Zero();
+        for (int k = 0; k < 4; ++k)
+            for (int j = 0; j < 4; ++j)
+                for (int i = 0; i < 4; ++i)
+                    p += b[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)] * lattice.point(region[0] + i, region[1] + j, region[2] + k);
+        return Eigen::Vector3d((p - domain.target_origin) / h);
+    };
+    // The voxel's image: the bounding box of the parallelepiped spanned by the central differences, and the
+    // share |det| / box volume of each overlap that keeps the deposited weight equal to the image's volume.
+    auto splat_box = [&](std::int64_t e, std::int64_t f, std::int64_t g, Eigen::Vector3d& lo, Eigen::Vector3d& hi, double& mass) {
+        const std::array<int, 3> region{int(std::min<std::int64_t>(e / domain.granularity[0], regions[0] - 1)),
+                                        int(std::min<std::int64_t>(f / domain.granularity[1], regions[1] - 1)),
+                                        int(std::min<std::int64_t>(g / domain.granularity[2], regions[2] - 1))};
+        const std::array<std::int64_t, 3> at{e, f, g};
+        const Eigen::Vector3d c = map(at, region);
+        Eigen::Matrix3d edges;
+        for (std::size_t axis = 0; axis < 3; ++axis) {
+            auto next = at, previous = at;
+            ++next[axis], --previous[axis];
+            edges.col(int(axis)) = 0.5 * (map(next, region) - map(previous, region));
+        }
+        const Eigen::Vector3d half = 0.5 * edges.cwiseAbs().rowwise().sum();
+        lo = c - half, hi = c + half;
+        const double box = 8.0 * half.prod();
+        mass = box > 0 ? std::min(1.0, std::abs(edges.col(0).dot(edges.col(1).cross(edges.col(2)))) / box) : 0.0;
+    };
+    // Pass 1: the target's bounds.
+    Eigen::Vector3d all_lo = Eigen::Vector3d::Constant(1e300), all_hi = -all_lo;
+    for (std::int64_t g = 0; g < dm.dims[2]; ++g)
+        for (std::int64_t f = 0; f < dm.dims[1]; ++f)
+            for (std::int64_t e = 0; e < dm.dims[0]; ++e) {
+                Eigen::Vector3d lo, hi;
+                double mass;
+                splat_box(e, f, g, lo, hi, mass);
+                all_lo = all_lo.cwiseMin(lo), all_hi = all_hi.cwiseMax(hi);
+            }
+    std::array<std::int64_t, 3> first, dims;
+    for (std::size_t a = 0; a < 3; ++a) {
+        first[a] = std::int64_t(std::floor(all_lo[int(a)] + 0.5));
+        dims[a] = std::int64_t(std::floor(all_hi[int(a)] + 0.5)) - first[a] + 1;
+    }
+    Voxmap out(dims, domain.target_origin + h * Eigen::Vector3d(double(first[0]), double(first[1]), double(first[2])), h);
+    std::vector<double> weight(out.density.size(), 0.0), value(out.density.size(), 0.0);
+    // Pass 2: splat.
+    for (std::int64_t g = 0; g < dm.dims[2]; ++g)
+        for (std::int64_t f = 0; f < dm.dims[1]; ++f)
+            for (std::int64_t e = 0; e < dm.dims[0]; ++e) {
+                Eigen::Vector3d lo, hi;
+                double mass;
+                splat_box(e, f, g, lo, hi, mass);
+                const double density = dm.at(e, f, g);
+                for (std::int64_t z = std::int64_t(std::floor(lo.z() + 0.5)); z <= std::int64_t(std::floor(hi.z() + 0.5)); ++z)
+                    for (std::int64_t y = std::int64_t(std::floor(lo.y() + 0.5)); y <= std::int64_t(std::floor(hi.y() + 0.5)); ++y)
+                        for (std::int64_t x = std::int64_t(std::floor(lo.x() + 0.5)); x <= std::int64_t(std::floor(hi.x() + 0.5)); ++x) {
+                            const double w = std::max(0.0, std::min(hi.x(), x + 0.5) - std::max(lo.x(), x - 0.5)) *
+                                             std::max(0.0, std::min(hi.y(), y + 0.5) - std::max(lo.y(), y - 0.5)) *
+                                             std::max(0.0, std::min(hi.z(), z + 0.5) - std::max(lo.z(), z - 0.5)) * mass;
+                            const std::size_t t = std::size_t(out.index(x - first[0], y - first[1], z - first[2]));
+                            weight[t] += w;
+                            value[t] += w * density;
+                        }
+            }
+    for (std::size_t t = 0; t < out.density.size(); ++t)
+        out.density[t] = float(std::min(1.0, weight[t] < 1 ? value[t] : value[t] / weight[t]));
+    return out;
+}
+
+} // namespace voxwarp

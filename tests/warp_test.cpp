@@ -1,0 +1,205 @@
+// The warp engine against analytic answers (tolerances in voxels or density units) and the naive reference.
+#include "test_helpers.h"
+
+#include <voxwarp/basis.h>
+#include <voxwarp/errors.h>
+#include <voxwarp/extract.h>
+#include <voxwarp/foldover.h>
+#include <voxwarp/surface_distance.h>
+#include <voxwarp/voxelize.h>
+#include <voxwarp/warp.h>
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include <tbb/task_arena.h>
+
+namespace voxwarp {
+namespace {
+
+/// Density of `v` at the voxel whose centre is world point origin + h * (i, j, k) of grid `ref`; 0 outside.
+float density_on_grid(const Voxmap& v, const Voxmap& ref, std::int64_t i, std::int64_t j, std::int64_t k) {
+    const Eigen::Vector3d idx = v.index_of(ref.world(double(i), double(j), double(k)));
+    const std::int64_t x = std::llround(idx.x()), y = std::llround(idx.y()), z = std::llround(idx.z());
+    if (x < 0 || y < 0 || z < 0 || x >= v.dims[0] || y >= v.dims[1] || z >= v.dims[2]) return 0.0f;
+    return v.at(x, y, z);
+}
+
+/// Largest density difference between two voxmaps on aligned grids, over the union of their extents.
+double max_difference(const Voxmap& a, const Voxmap& b) {
+    double worst = 0;
+    for (std::int64_t k = 0; k < a.dims[2]; ++k)
+        for (std::int64_t j = 0; j < a.dims[1]; ++j)
+            for (std::int64_t i = 0; i < a.dims[0]; ++i) worst = std::max(worst, double(std::abs(a.at(i, j, k) - density_on_grid(b, a, i, j, k))));
+    for (std::int64_t k = 0; k < b.dims[2]; ++k)
+        for (std::int64_t j = 0; j < b.dims[1]; ++j)
+            for (std::int64_t i = 0; i < b.dims[0]; ++i) worst = std::max(worst, double(std::abs(b.at(i, j, k) - density_on_grid(a, b, i, j, k))));
+    return worst;
+}
+
+Voxmap sphere_voxmap(int resolution = 24) { return voxelize(test::sphere_mesh({0.1, -0.2, 0.3}, 1.0, 3), {.resolution = resolution}); }
+
+TEST(Basis, TableSumsToOneAndMatchesClosedForm) {
+    const BasisTable table(7);
+    for (int e = 0; e <= 7; ++e) {
+        const double t = e / 7.0;
+        const auto& b = table.values[std::size_t(e)];
+        EXPECT_NEAR(b[0] + b[1] + b[2] + b[3], 1.0, 1e-15);
+        EXPECT_NEAR(b[0], std::pow(1 - t, 3) / 6, 1e-15);
+        EXPECT_NEAR(b[1], (3 * t * t * t - 6 * t * t + 4) / 6, 1e-15);
+        EXPECT_NEAR(b[2], (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6, 1e-15);
+        EXPECT_NEAR(b[3], t * t * t / 6, 1e-15);
+        const auto d = cubic_basis_derivative(t);
+        const auto p = cubic_basis(t + 1e-6), m = cubic_basis(t - 1e-6);
+        for (int i = 0; i < 4; ++i) EXPECT_NEAR(d[std::size_t(i)], (p[std::size_t(i)] - m[std::size_t(i)]) / 2e-6, 1e-8);
+    }
+}
+
+TEST(Lattice, UndeformedUniformMapIsTheAffineIdentity) {
+    const Lattice l = Lattice::uniform({6, 5, 7}, {1, 2, 3}, {0.5, 0.25, 2});
+    for (const Eigen::Vector3d stu : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(3, 2, 4), Eigen::Vector3d(1.3, 0.7, 2.9)}) {
+        EXPECT_NEAR((l.evaluate(stu) - Eigen::Vector3d(1 + 0.5 * stu.x(), 2 + 0.25 * stu.y(), 3 + 2 * stu.z())).norm(), 0.0, 1e-12);
+        EXPECT_NEAR((l.parameter_of(l.evaluate(stu)) - stu).norm(), 0.0, 1e-12);
+    }
+    EXPECT_THROW(Lattice::uniform({3, 9, 9}, {0, 0, 0}, {1, 1, 1}), InvalidInput);
+}
+
+TEST(Lattice, ClampedImageIsExactlyTheDataBox) {
+    const Eigen::Vector3d lo(-1, 0, 2), hi(3, 1, 5);
+    const Lattice l = Lattice::clamped({9, 7, 6}, lo, hi);
+    const auto r = l.regions();
+    for (int c = 0; c < 8; ++c) {
+        const Eigen::Vector3d stu((c & 1) ? r[0] : 0, (c & 2) ? r[1] : 0, (c & 4) ? r[2] : 0);
+        const Eigen::Vector3d corner((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
+        EXPECT_NEAR((l.evaluate(stu) - corner).norm(), 0.0, 1e-12);
+    }
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(0, 1);
+    for (int n = 0; n < 1000; ++n) {
+        const Eigen::Vector3d p = l.evaluate(Eigen::Vector3d(u(rng) * r[0], u(rng) * r[1], u(rng) * r[2]));
+        EXPECT_TRUE((p.array() >= lo.array() - 1e-12).all() && (p.array() <= hi.array() + 1e-12).all());
+    }
+    // A face of the parameter box maps onto the matching face of the data box.
+    EXPECT_NEAR(l.evaluate({r[0], 0.37 * r[1], 0.81 * r[2]}).x(), hi.x(), 1e-12);
+}
+
+TEST(Warp, UndeformedUniformLatticeIsIdentity) {
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {.size = {9, 9, 9}});
+    const Voxmap out = warp(domain, domain.lattice);
+    EXPECT_LE(max_difference(input, out), 1e-5);
+}
+
+TEST(Warp, IntegerTranslationShiftsTheDataExactly) {
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {.size = {7, 8, 9}});
+    Lattice moved = domain.lattice;
+    const Eigen::Vector3d shift = input.voxel_size * Eigen::Vector3d(3, -2, 5);
+    for (auto& p : moved.points()) p += shift;
+    const Voxmap out = warp(domain, moved);
+    Voxmap shifted = input;
+    shifted.origin += shift;
+    EXPECT_LE(max_difference(shifted, out), 1e-6);
+}
+
+TEST(Warp, UniformScaleByTwoMultipliesVolumeByEight) {
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {});
+    Lattice scaled = domain.lattice;
+    const Eigen::Vector3d centre(0.1, -0.2, 0.3);
+    for (auto& p : scaled.points()) p = centre + 2.0 * (p - centre);
+    const Voxmap out = warp(domain, scaled);
+    EXPECT_NEAR(enclosed_volume(out), 8 * enclosed_volume(input), 0.01 * 8 * enclosed_volume(input));
+    // And the surface is the analytic sphere of radius 2.
+    const TriangleMesh mesh = extract(out);
+    double sum = 0;
+    for (const auto& v : mesh.vertices) sum += std::abs((v - centre).norm() - 2.0);
+    EXPECT_LE(sum / double(mesh.vertices.size()) / input.voxel_size, 0.25);
+}
+
+TEST(Warp, RotatedBoxMatchesTheRotatedBox) {
+    const Eigen::Vector3d lo(-1, -0.6, -0.4), hi(1, 0.6, 0.4);
+    const Voxmap input = voxelize(test::box_mesh(lo, hi, 8), {.resolution = 48});
+    const WarpDomain domain = make_domain(input, {.padding = 0.5});
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(30.0 * std::numbers::pi / 180, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    Lattice rotated = domain.lattice;
+    for (auto& p : rotated.points()) p = R * p; // B-splines reproduce affine maps: the warp is this rotation exactly
+    const TriangleMesh out = extract(warp(domain, rotated));
+    TriangleMesh rotated_box = test::box_mesh(lo, hi, 8);
+    for (auto& v : rotated_box.vertices) v = R * v;
+    const TriangleMesh expected = extract(voxelize(rotated_box, {.voxel_size = input.voxel_size}));
+    const DistanceStats d = symmetric_distance(out, expected);
+    EXPECT_LE(d.mean / input.voxel_size, 0.25);
+    EXPECT_EQ(topology(out).boundary_edges, 0);
+}
+
+TEST(Warp, FastPathMatchesTheNaiveReference) {
+    const Voxmap input = sphere_voxmap(20);
+    const WarpDomain domain = make_domain(input, {.size = {7, 7, 7}});
+    Lattice moved = domain.lattice;
+    std::mt19937 rng(11);
+    std::normal_distribution<double> n(0, 0.8 * input.voxel_size);
+    for (auto& p : moved.points()) p += Eigen::Vector3d(n(rng), n(rng), n(rng));
+    EXPECT_LE(max_difference(warp(domain, moved), warp_reference(domain, moved)), 1e-6);
+}
+
+TEST(Warp, IncrementalEqualsFullRecompute) {
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {.size = {8, 9, 7}});
+    Warp progressive(domain, domain.lattice);
+    std::mt19937 rng(5);
+    std::uniform_int_distribution<int> ix(0, 7), iy(0, 8), iz(0, 6);
+    std::normal_distribution<double> n(0, 1.5 * input.voxel_size);
+    for (int step = 0; step < 12; ++step) {
+        const int i = ix(rng), j = iy(rng), k = iz(rng);
+        progressive.move_control_point(i, j, k, progressive.lattice().point(i, j, k) + Eigen::Vector3d(n(rng), n(rng), n(rng)));
+    }
+    const Voxmap incremental = progressive.target();
+    const Voxmap full = warp(domain, progressive.lattice());
+    // Fixed-point sums make the two bit-identical, wherever each target's bounds lie.
+    EXPECT_EQ(max_difference(incremental, full), 0.0);
+}
+
+TEST(Warp, SameResultForAnyThreadCount) {
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {});
+    Lattice moved = domain.lattice;
+    moved.set_point(4, 4, 4, moved.point(4, 4, 4) + Eigen::Vector3d(2, 1, 0) * input.voxel_size);
+    const Voxmap parallel = warp(domain, moved);
+    tbb::task_arena one(1);
+    Voxmap serial;
+    one.execute([&] { serial = warp(domain, moved); });
+    EXPECT_EQ(parallel.density, serial.density);
+}
+
+TEST(Warp, ClampedCaptureWarpsTheSameData) {
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {.placement = Placement::clamped});
+    const Voxmap out = warp(domain, domain.lattice);
+    EXPECT_NEAR(enclosed_volume(out), enclosed_volume(input), 0.02 * enclosed_volume(input));
+    const TriangleMesh mesh = extract(out);
+    double sum = 0;
+    for (const auto& v : mesh.vertices) sum += std::abs((v - Eigen::Vector3d(0.1, -0.2, 0.3)).norm() - 1.0);
+    EXPECT_LE(sum / double(mesh.vertices.size()) / input.voxel_size, 0.25);
+}
+
+TEST(Foldover, DeliberateFoldIsReported) {
+    const Lattice rest = Lattice::uniform({9, 9, 9}, {0, 0, 0}, {1, 1, 1});
+    EXPECT_TRUE(find_folds(rest).empty());
+    Lattice folded = rest;
+    // dx/ds near the point drops by up to 0.667 * (2/3)^2 = 0.30 per unit of displacement: 6 units fold it.
+    folded.set_point(4, 4, 4, rest.point(4, 4, 4) + Eigen::Vector3d(-6, 0, 0));
+    const auto folds = find_folds(folded);
+    ASSERT_FALSE(folds.empty());
+    for (const auto& f : folds) {
+        EXPECT_LT(f.min_determinant, 0.0);
+        for (int a = 0; a < 3; ++a) { // every reported region is one the moved point shapes
+            EXPECT_GE(f.region[std::size_t(a)], 1);
+            EXPECT_LE(f.region[std::size_t(a)], 4);
+        }
+    }
+}
+
+} // namespace
+} // namespace voxwarp
