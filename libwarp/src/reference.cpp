@@ -42,16 +42,21 @@ Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
         const double box = 8.0 * half.prod();
         mass = box > 0 ? std::min(1.0, std::abs(edges.col(0).dot(edges.col(1).cross(edges.col(2)))) / box) : 0.0;
     };
+    auto for_each_voxel = [&](auto&& visit) {
+        for (std::int64_t g = 0; g < dm.dims[2]; ++g)
+            for (std::int64_t f = 0; f < dm.dims[1]; ++f)
+                for (std::int64_t e = 0; e < dm.dims[0]; ++e) {
+                    Eigen::Vector3d lo, hi;
+                    double mass;
+                    splat_box(e, f, g, lo, hi, mass);
+                    visit(lo, hi, mass, double(dm.at(e, f, g)));
+                }
+    };
     // Pass 1: the target's bounds.
     Eigen::Vector3d all_lo = Eigen::Vector3d::Constant(1e300), all_hi = -all_lo;
-    for (std::int64_t g = 0; g < dm.dims[2]; ++g)
-        for (std::int64_t f = 0; f < dm.dims[1]; ++f)
-            for (std::int64_t e = 0; e < dm.dims[0]; ++e) {
-                Eigen::Vector3d lo, hi;
-                double mass;
-                splat_box(e, f, g, lo, hi, mass);
-                all_lo = all_lo.cwiseMin(lo), all_hi = all_hi.cwiseMax(hi);
-            }
+    for_each_voxel([&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double, double) {
+        all_lo = all_lo.cwiseMin(lo), all_hi = all_hi.cwiseMax(hi);
+    });
     std::array<std::int64_t, 3> first, dims;
     for (std::size_t a = 0; a < 3; ++a) {
         first[a] = std::int64_t(std::floor(all_lo[int(a)] + 0.5));
@@ -60,24 +65,18 @@ Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
     Voxmap out(dims, domain.target_origin + h * Eigen::Vector3d(double(first[0]), double(first[1]), double(first[2])), h);
     std::vector<double> weight(out.density.size(), 0.0), value(out.density.size(), 0.0);
     // Pass 2: splat.
-    for (std::int64_t g = 0; g < dm.dims[2]; ++g)
-        for (std::int64_t f = 0; f < dm.dims[1]; ++f)
-            for (std::int64_t e = 0; e < dm.dims[0]; ++e) {
-                Eigen::Vector3d lo, hi;
-                double mass;
-                splat_box(e, f, g, lo, hi, mass);
-                const double density = dm.at(e, f, g);
-                for (std::int64_t z = std::int64_t(std::floor(lo.z() + 0.5)); z <= std::int64_t(std::floor(hi.z() + 0.5)); ++z)
-                    for (std::int64_t y = std::int64_t(std::floor(lo.y() + 0.5)); y <= std::int64_t(std::floor(hi.y() + 0.5)); ++y)
-                        for (std::int64_t x = std::int64_t(std::floor(lo.x() + 0.5)); x <= std::int64_t(std::floor(hi.x() + 0.5)); ++x) {
-                            const double w = std::max(0.0, std::min(hi.x(), x + 0.5) - std::max(lo.x(), x - 0.5)) *
-                                             std::max(0.0, std::min(hi.y(), y + 0.5) - std::max(lo.y(), y - 0.5)) *
-                                             std::max(0.0, std::min(hi.z(), z + 0.5) - std::max(lo.z(), z - 0.5)) * mass;
-                            const std::size_t t = std::size_t(out.index(x - first[0], y - first[1], z - first[2]));
-                            weight[t] += w;
-                            value[t] += w * density;
-                        }
-            }
+    for_each_voxel([&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double mass, double density) {
+        for (std::int64_t z = std::int64_t(std::floor(lo.z() + 0.5)); z <= std::int64_t(std::floor(hi.z() + 0.5)); ++z)
+            for (std::int64_t y = std::int64_t(std::floor(lo.y() + 0.5)); y <= std::int64_t(std::floor(hi.y() + 0.5)); ++y)
+                for (std::int64_t x = std::int64_t(std::floor(lo.x() + 0.5)); x <= std::int64_t(std::floor(hi.x() + 0.5)); ++x) {
+                    const double w = std::max(0.0, std::min(hi.x(), x + 0.5) - std::max(lo.x(), x - 0.5)) *
+                                     std::max(0.0, std::min(hi.y(), y + 0.5) - std::max(lo.y(), y - 0.5)) *
+                                     std::max(0.0, std::min(hi.z(), z + 0.5) - std::max(lo.z(), z - 0.5)) * mass;
+                    const std::size_t t = std::size_t(out.index(x - first[0], y - first[1], z - first[2]));
+                    weight[t] += w;
+                    value[t] += w * density;
+                }
+    });
     for (std::size_t t = 0; t < out.density.size(); ++t)
         out.density[t] = float(std::min(1.0, weight[t] < 1 ? value[t] : value[t] / weight[t]));
     return out;
