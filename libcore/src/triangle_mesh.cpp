@@ -26,6 +26,12 @@ TriangleMesh TriangleMesh::triangulated() const {
     return out;
 }
 
+const std::vector<std::array<std::int32_t, 3>>& all_triangles(const TriangleMesh& mesh, TriangleMesh& storage) {
+    if (mesh.quads.empty()) return mesh.triangles;
+    storage = mesh.triangulated();
+    return storage.triangles;
+}
+
 Bounds bounds(const TriangleMesh& mesh) {
     Bounds b{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()),
              Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
@@ -51,8 +57,8 @@ struct UnionFind {
 } // namespace
 
 MeshTopology topology(const TriangleMesh& input) {
-    const TriangleMesh mesh = input.quads.empty() ? TriangleMesh{} : input.triangulated();
-    const auto& tris = input.quads.empty() ? input.triangles : mesh.triangles;
+    TriangleMesh storage;
+    const auto& tris = all_triangles(input, storage);
     const std::size_t nv = input.vertices.size();
     MeshTopology t;
     t.faces = std::int64_t(input.face_count());
@@ -124,8 +130,8 @@ MeshTopology topology(const TriangleMesh& input) {
 }
 
 double enclosed_volume(const TriangleMesh& input) {
-    const TriangleMesh tri = input.quads.empty() ? TriangleMesh{} : input.triangulated();
-    const auto& tris = input.quads.empty() ? input.triangles : tri.triangles;
+    TriangleMesh storage;
+    const auto& tris = all_triangles(input, storage);
     double six_volume = 0;
     for (const auto& t : tris)
         six_volume += input.vertices[t[0]].dot(input.vertices[t[1]].cross(input.vertices[t[2]]));

@@ -25,8 +25,8 @@ using Primitive = CGAL::AABB_triangle_primitive<Kernel, Iterator>;
 using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
 
 std::vector<Triangle> cgal_triangles(const TriangleMesh& mesh) {
-    const TriangleMesh tri = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
-    const auto& faces = mesh.quads.empty() ? mesh.triangles : tri.triangles;
+    TriangleMesh storage;
+    const auto& faces = all_triangles(mesh, storage);
     std::vector<Triangle> out;
     out.reserve(faces.size());
     auto p = [&](std::int32_t i) { return Point(mesh.vertices[i].x(), mesh.vertices[i].y(), mesh.vertices[i].z()); };
@@ -38,8 +38,8 @@ std::vector<Triangle> cgal_triangles(const TriangleMesh& mesh) {
 }
 
 std::vector<Eigen::Vector3d> sample(const TriangleMesh& mesh, const SurfaceDistanceOptions& options) {
-    const TriangleMesh tri = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
-    const auto& faces = mesh.quads.empty() ? mesh.triangles : tri.triangles;
+    TriangleMesh storage;
+    const auto& faces = all_triangles(mesh, storage);
     std::vector<Eigen::Vector3d> points;
     std::vector<char> used(mesh.vertices.size(), 0);
     for (const auto& f : faces)

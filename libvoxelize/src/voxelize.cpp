@@ -36,8 +36,8 @@ void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
 /// Bounds of the faces that have area: zero-area stray triangles (common in scans) enclose nothing and
 /// would otherwise stretch the grid, and with it the voxel size a --resolution gives.
 Bounds solid_bounds(const TriangleMesh& mesh) {
-    const TriangleMesh triangulated = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
-    const auto& faces = mesh.quads.empty() ? mesh.triangles : triangulated.triangles;
+    TriangleMesh storage;
+    const auto& faces = all_triangles(mesh, storage);
     TriangleMesh with_area;
     with_area.vertices = mesh.vertices;
     for (const auto& f : faces)
@@ -57,8 +57,8 @@ std::vector<openvdb::Vec3s> vdb_points(const TriangleMesh& mesh) {
 }
 
 std::vector<openvdb::Vec3I> vdb_triangles(const TriangleMesh& mesh) {
-    const TriangleMesh tri = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
-    const auto& source = mesh.quads.empty() ? mesh.triangles : tri.triangles;
+    TriangleMesh storage;
+    const auto& source = all_triangles(mesh, storage);
     std::vector<openvdb::Vec3I> triangles(source.size());
     for (std::size_t i = 0; i < triangles.size(); ++i)
         triangles[i] = openvdb::Vec3I(openvdb::Index32(source[i][0]), openvdb::Index32(source[i][1]), openvdb::Index32(source[i][2]));
@@ -66,7 +66,7 @@ std::vector<openvdb::Vec3I> vdb_triangles(const TriangleMesh& mesh) {
 }
 
 /// Narrow-band unsigned distance (world units) whose voxels are then signed, negative inside, by the
-/// generalized winding number. Off-band voxels are left at the positive background for fill_off_band().
+/// generalized winding number. Off-band voxels are left at the positive background for sign_off_band().
 openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const WindingNumber& winding, double orientation,
                                             const openvdb::math::Transform& xform, float half_width, Progress& progress) {
     vdb_internal::ProgressInterrupter interrupter{&progress};

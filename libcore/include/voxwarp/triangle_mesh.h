@@ -24,6 +24,10 @@ struct TriangleMesh {
     TriangleMesh triangulated() const;
 };
 
+/// Every face as a triangle: `mesh.triangles` itself when the mesh has no quads, otherwise the triangles of
+/// mesh.triangulated(), kept alive in `storage`. Avoids copying the common all-triangle mesh.
+const std::vector<std::array<std::int32_t, 3>>& all_triangles(const TriangleMesh& mesh, TriangleMesh& storage);
+
 /// Axis-aligned bounds of the vertices, world units. Empty mesh: min = +inf, max = -inf.
 struct Bounds {
     Eigen::Vector3d min, max;
