@@ -13,7 +13,7 @@
 /// central differences, each overlap scaled by |det| / box volume (the paper's box of six face centres loses a
 /// quarter of the density under a 30 degree rotation; this one deposits each voxel's image volume exactly and
 /// equals the paper's box for translations and axis scalings). Weights are accumulated in
-/// 64-bit fixed point (2^-32), so sums do not depend on order: the result is the same for any thread count,
+/// 32-bit fixed point (2^-22), so sums do not depend on order: the result is the same for any thread count,
 /// and an incremental update (subtract a region's old contribution, add its new one) is bit-identical to a
 /// full recompute.
 #pragma once
