@@ -30,5 +30,7 @@ using Action = std::function<void()>;
 void add_voxelize(CLI::App& app, Global& global, Action& action);
 void add_extract(CLI::App& app, Global& global, Action& action);
 void add_info(CLI::App& app, Global& global, Action& action);
+void add_deform(CLI::App& app, Global& global, Action& action);
+void add_warp(CLI::App& app, Global& global, Action& action);
 
 } // namespace voxwarp::cli

@@ -46,6 +46,7 @@ int main(int argc, char** argv) {
                  "A mesh is voxelized into a density volume (a voxmap), warped by a cubic B-spline lattice, and\n"
                  "re-polygonized, so large deformations of coarse models come out smooth and crease-free."};
     app.require_subcommand(1);
+    app.fallthrough(); // global flags such as --quiet work after the subcommand too
     app.set_version_flag("--version", "voxwarp 0.1.0");
     Global global;
     app.add_flag("-q,--quiet", global.quiet, "No progress or notes on stderr");
@@ -53,6 +54,8 @@ int main(int argc, char** argv) {
     add_voxelize(app, global, action);
     add_extract(app, global, action);
     add_info(app, global, action);
+    add_deform(app, global, action);
+    add_warp(app, global, action);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

@@ -1,0 +1,35 @@
+/// @file edit_file.h
+/// @brief Edit files: JSON scripts of constraint edits (schema in README.md, "Edit files").
+///
+/// {"lattice": {"size": 9 | [nx, ny, nz], "placement": "uniform" | "clamped", "padding": 0.25},   (all optional)
+///  "edits": [ {"constraints": [ {"move": [x,y,z], "to": [x,y,z], "weight": w},
+///                               {"pin": [x,y,z], "weight": w},
+///                               {"control_point": [i,j,k], "offset": [dx,dy,dz], "weight": w} ]} ]}
+/// Points are world coordinates. Validation is strict: unknown or missing fields, wrong types, non-finite
+/// numbers and out-of-range values are refused with the file, the JSON path and what was expected.
+#pragma once
+
+#include <voxwarp/constraints.h>
+#include <voxwarp/warp.h>
+
+#include <string>
+#include <vector>
+
+namespace voxwarp {
+
+struct Edit {
+    std::vector<Constraint> constraints; ///< each named by its JSON path, e.g. "edits[0].constraints[2]"
+};
+
+struct EditScript {
+    LatticeSpec lattice; ///< defaults: 9^3, uniform, padding 0.25
+    std::vector<Edit> edits;
+};
+
+/// Parse an edit script from text; `source` names it in messages. @throw InvalidInput.
+EditScript parse_edit_script(const std::string& text, const std::string& source);
+
+/// Read and parse an edit file. @throw IOError when it cannot be read, InvalidInput when it is malformed.
+EditScript read_edit_file(const std::string& path);
+
+} // namespace voxwarp

@@ -1,0 +1,175 @@
+#include <voxwarp/edit_file.h>
+#include <voxwarp/errors.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace voxwarp {
+
+namespace edit_file_internal {
+
+using json = nlohmann::json;
+
+struct Context {
+    std::string source;
+    [[noreturn]] void fail(const std::string& path, const std::string& what) const {
+        throw InvalidInput(source + ": " + (path.empty() ? "" : path + ": ") + what);
+    }
+};
+
+std::string describe(const json& v) {
+    std::string s = v.dump();
+    if (s.size() > 40) s = s.substr(0, 37) + "...";
+    return s;
+}
+
+void only_keys(const Context& ctx, const json& object, const std::string& path, const std::set<std::string>& allowed) {
+    for (const auto& [key, value] : object.items())
+        if (!allowed.count(key)) {
+            std::string list;
+            for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+            ctx.fail(path.empty() ? key : path + "." + key, "unknown field; expected one of: " + list);
+        }
+}
+
+const json& require(const Context& ctx, const json& object, const std::string& path, const std::string& key) {
+    if (!object.contains(key)) ctx.fail(path, "missing field \"" + key + "\"");
+    return object.at(key);
+}
+
+double finite_number(const Context& ctx, const json& v, const std::string& path) {
+    if (!v.is_number()) ctx.fail(path, "expected a number, got " + describe(v));
+    const double d = v.get<double>();
+    if (!std::isfinite(d)) ctx.fail(path, "expected a finite number, got " + describe(v));
+    return d;
+}
+
+Eigen::Vector3d point3(const Context& ctx, const json& v, const std::string& path) {
+    if (!v.is_array() || v.size() != 3) ctx.fail(path, "expected an array of three finite numbers, got " + describe(v));
+    Eigen::Vector3d p;
+    for (int a = 0; a < 3; ++a) p[a] = finite_number(ctx, v[std::size_t(a)], path + "[" + std::to_string(a) + "]");
+    return p;
+}
+
+int integer(const Context& ctx, const json& v, const std::string& path) {
+    if (!v.is_number_integer()) ctx.fail(path, "expected an integer, got " + describe(v));
+    const auto i = v.get<std::int64_t>();
+    if (i < -(1 << 30) || i > (1 << 30)) ctx.fail(path, "integer " + describe(v) + " is out of range");
+    return int(i);
+}
+
+LatticeSpec parse_lattice(const Context& ctx, const json& v) {
+    const std::string path = "lattice";
+    if (!v.is_object()) ctx.fail(path, "expected an object, got " + describe(v));
+    only_keys(ctx, v, path, {"size", "placement", "padding"});
+    LatticeSpec spec;
+    if (v.contains("placement")) {
+        const json& p = v["placement"];
+        if (!p.is_string() || (p != "uniform" && p != "clamped")) ctx.fail(path + ".placement", "expected \"uniform\" or \"clamped\", got " + describe(p));
+        spec.placement = placement_from_string(p.get<std::string>());
+    }
+    const int minimum = spec.placement == Placement::clamped ? 6 : 4;
+    if (v.contains("size")) {
+        const json& s = v["size"];
+        if (s.is_number_integer()) {
+            const int n = integer(ctx, s, path + ".size");
+            spec.size = {n, n, n};
+        } else if (s.is_array() && s.size() == 3) {
+            for (int a = 0; a < 3; ++a) spec.size[std::size_t(a)] = integer(ctx, s[std::size_t(a)], path + ".size[" + std::to_string(a) + "]");
+        } else {
+            ctx.fail(path + ".size", "expected an integer or an array of three integers, got " + describe(s));
+        }
+        for (int a = 0; a < 3; ++a)
+            if (spec.size[std::size_t(a)] < minimum || spec.size[std::size_t(a)] > 64)
+                ctx.fail(path + ".size", "control points per axis must be in [" + std::to_string(minimum) + ", 64] for the " +
+                                             to_string(spec.placement) + " placement, got " + describe(s));
+    }
+    if (v.contains("padding")) {
+        spec.padding = finite_number(ctx, v["padding"], path + ".padding");
+        if (spec.padding < 0 || spec.padding > 4) ctx.fail(path + ".padding", "expected a fraction of the model's size in [0, 4], got " + describe(v["padding"]));
+    }
+    return spec;
+}
+
+Constraint parse_constraint(const Context& ctx, const json& v, const std::string& path) {
+    if (!v.is_object()) ctx.fail(path, "expected an object, got " + describe(v));
+    Constraint c;
+    c.name = path;
+    const int kinds = int(v.contains("move")) + int(v.contains("pin")) + int(v.contains("control_point"));
+    if (kinds != 1) ctx.fail(path, "expected exactly one of \"move\", \"pin\", \"control_point\"");
+    if (v.contains("move")) {
+        only_keys(ctx, v, path, {"move", "to", "weight"});
+        c.kind = ConstraintKind::move;
+        c.point = point3(ctx, v["move"], path + ".move");
+        c.to = point3(ctx, require(ctx, v, path, "to"), path + ".to");
+    } else if (v.contains("pin")) {
+        only_keys(ctx, v, path, {"pin", "weight"});
+        c.kind = ConstraintKind::pin;
+        c.point = c.to = point3(ctx, v["pin"], path + ".pin");
+    } else {
+        only_keys(ctx, v, path, {"control_point", "offset", "weight"});
+        c.kind = ConstraintKind::control_point;
+        const json& idx = v["control_point"];
+        if (!idx.is_array() || idx.size() != 3) ctx.fail(path + ".control_point", "expected an array of three integers, got " + describe(idx));
+        for (int a = 0; a < 3; ++a) c.control_point[std::size_t(a)] = integer(ctx, idx[std::size_t(a)], path + ".control_point[" + std::to_string(a) + "]");
+        c.offset = point3(ctx, require(ctx, v, path, "offset"), path + ".offset");
+    }
+    if (v.contains("weight")) {
+        const double w = finite_number(ctx, v["weight"], path + ".weight");
+        if (!(w > 0)) ctx.fail(path + ".weight", "expected a number > 0, got " + describe(v["weight"]));
+        c.weight = w;
+    }
+    return c;
+}
+
+} // namespace edit_file_internal
+
+using namespace edit_file_internal;
+
+EditScript parse_edit_script(const std::string& text, const std::string& source) {
+    const Context ctx{source};
+    json root;
+    try {
+        root = json::parse(text);
+    } catch (const json::parse_error& e) {
+        ctx.fail("", std::string("not valid JSON: ") + e.what());
+    }
+    if (!root.is_object()) ctx.fail("", "expected a JSON object with \"edits\", got " + describe(root));
+    only_keys(ctx, root, "", {"lattice", "edits"});
+    EditScript script;
+    if (root.contains("lattice")) script.lattice = parse_lattice(ctx, root["lattice"]);
+    const json& edits = require(ctx, root, "", "edits");
+    if (!edits.is_array() || edits.empty()) ctx.fail("edits", "expected a non-empty array of edits, got " + describe(edits));
+    for (std::size_t e = 0; e < edits.size(); ++e) {
+        const std::string path = "edits[" + std::to_string(e) + "]";
+        const json& edit = edits[e];
+        if (!edit.is_object()) ctx.fail(path, "expected an object with \"constraints\", got " + describe(edit));
+        only_keys(ctx, edit, path, {"constraints"});
+        const json& list = require(ctx, edit, path, "constraints");
+        if (!list.is_array() || list.empty()) ctx.fail(path + ".constraints", "expected a non-empty array, got " + describe(list));
+        Edit out;
+        for (std::size_t c = 0; c < list.size(); ++c)
+            out.constraints.push_back(parse_constraint(ctx, list[c], path + ".constraints[" + std::to_string(c) + "]"));
+        script.edits.push_back(std::move(out));
+    }
+    return script;
+}
+
+EditScript read_edit_file(const std::string& path) {
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec)) throw IOError(path + ": no such file");
+    if (std::filesystem::file_size(path, ec) > (16u << 20)) throw InvalidInput(path + ": larger than 16 MiB; an edit file is a short JSON script");
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw IOError(path + ": cannot open for reading");
+    std::stringstream text;
+    text << in.rdbuf();
+    if (text.str().empty()) throw InvalidInput(path + ": file is empty");
+    return parse_edit_script(text.str(), path);
+}
+
+} // namespace voxwarp

@@ -1,0 +1,161 @@
+// The constraint solver against closed forms and independent dense solves.
+#include <voxwarp/constraints.h>
+#include <voxwarp/errors.h>
+
+#include <Eigen/SVD>
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace voxwarp {
+namespace {
+
+Constraint move(const Eigen::Vector3d& p, const Eigen::Vector3d& to, std::optional<double> weight = {}) {
+    Constraint c;
+    c.kind = ConstraintKind::move, c.point = p, c.to = to, c.weight = weight;
+    return c;
+}
+
+Constraint pin(const Eigen::Vector3d& p) {
+    Constraint c;
+    c.kind = ConstraintKind::pin, c.point = c.to = p;
+    return c;
+}
+
+/// Dense basis matrix over all control points (flat index), computed from the basis directly.
+Eigen::MatrixXd basis_matrix(const Lattice& l, const std::vector<Eigen::Vector3d>& points) {
+    Eigen::MatrixXd B = Eigen::MatrixXd::Zero(Eigen::Index(points.size()), Eigen::Index(l.control_point_count()));
+    for (std::size_t r = 0; r < points.size(); ++r) {
+        std::array<int, 3> region;
+        std::array<double, 64> w;
+        l.weights(l.parameter_of(points[r]), region, w);
+        for (int k = 0; k < 4; ++k)
+            for (int j = 0; j < 4; ++j)
+                for (int i = 0; i < 4; ++i) B(Eigen::Index(r), Eigen::Index(l.flat_index(region[0] + i, region[1] + j, region[2] + k))) += w[std::size_t(i + 4 * (j + 4 * k))];
+    }
+    return B;
+}
+
+Eigen::MatrixXd displacement(const Lattice& rest, const Lattice& moved) {
+    Eigen::MatrixXd d(rest.control_point_count(), 3);
+    for (std::size_t p = 0; p < rest.control_point_count(); ++p) d.row(Eigen::Index(p)) = (moved.points()[p] - rest.points()[p]).transpose();
+    return d;
+}
+
+const Lattice kRest = Lattice::uniform({7, 6, 8}, {-1, -2, -0.5}, {0.5, 0.8, 0.4});
+
+TEST(Constraints, SingleMoveIsTheDMFFDClosedForm) {
+    const Eigen::Vector3d p(0.37, 0.11, 0.63), d(0.05, -0.02, 0.08);
+    const ConstraintSolution s = solve_constraints(kRest, {move(p, p + d)});
+    EXPECT_FALSE(s.least_squares);
+    // Hsu et al.: dP_i = B_i d / sum_j B_j^2.
+    std::array<int, 3> region;
+    std::array<double, 64> w;
+    kRest.weights(kRest.parameter_of(p), region, w);
+    double sum_sq = 0;
+    for (double x : w) sum_sq += x * x;
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) {
+                const Eigen::Vector3d expected = w[std::size_t(i + 4 * (j + 4 * k))] * d / sum_sq;
+                const Eigen::Vector3d got = s.lattice.point(region[0] + i, region[1] + j, region[2] + k) - kRest.point(region[0] + i, region[1] + j, region[2] + k);
+                EXPECT_NEAR((got - expected).norm(), 0.0, 1e-12);
+            }
+    EXPECT_NEAR((s.lattice.evaluate(kRest.parameter_of(p)) - (p + d)).norm(), 0.0, 1e-12);
+}
+
+TEST(Constraints, EqualsIndependentPseudoinverseAndHasLeastNorm) {
+    std::mt19937 rng(2);
+    std::uniform_real_distribution<double> u(0, 1), n(-0.1, 0.1);
+    std::vector<Eigen::Vector3d> points;
+    std::vector<Constraint> cs;
+    for (int c = 0; c < 6; ++c) {
+        const Eigen::Vector3d p = kRest.evaluate(Eigen::Vector3d(u(rng) * 4, u(rng) * 3, u(rng) * 5));
+        points.push_back(p);
+        cs.push_back(move(p, p + Eigen::Vector3d(n(rng), n(rng), n(rng))));
+    }
+    const ConstraintSolution s = solve_constraints(kRest, cs);
+    const Eigen::MatrixXd B = basis_matrix(kRest, points);
+    Eigen::MatrixXd D(6, 3);
+    for (int c = 0; c < 6; ++c) D.row(c) = (cs[std::size_t(c)].to - cs[std::size_t(c)].point).transpose();
+    const Eigen::MatrixXd expected = B.jacobiSvd(Eigen::ComputeThinU | Eigen::ComputeThinV).solve(D);
+    const Eigen::MatrixXd got = displacement(kRest, s.lattice);
+    EXPECT_LE((got - expected).cwiseAbs().maxCoeff(), 1e-10);
+    EXPECT_LE((B * got - D).cwiseAbs().maxCoeff(), 1e-10);
+    // Any other feasible answer (plus a null-space direction of B) moves the control points more.
+    Eigen::FullPivLU<Eigen::MatrixXd> lu(B);
+    const Eigen::MatrixXd null = lu.kernel();
+    ASSERT_GT(null.cols(), 0);
+    for (int q = 0; q < 5; ++q) {
+        const Eigen::MatrixXd other = got + null.col(q * 7 % null.cols()) * Eigen::RowVector3d(0.01, -0.02, 0.03);
+        EXPECT_LE((B * other - D).cwiseAbs().maxCoeff(), 1e-10);
+        EXPECT_GT(other.squaredNorm(), got.squaredNorm());
+    }
+}
+
+TEST(Constraints, TripledPointsOfTheClampedLatticeMoveTogether) {
+    const Lattice clamped = Lattice::clamped({7, 7, 7}, {0, 0, 0}, {4, 4, 4});
+    const Eigen::Vector3d p(0.2, 0.3, 0.25); // near the corner the tripled points shape
+    const ConstraintSolution s = solve_constraints(clamped, {move(p, p + Eigen::Vector3d(0.1, 0.1, -0.05))});
+    const Eigen::Vector3d corner = s.lattice.point(0, 0, 0) - clamped.point(0, 0, 0);
+    EXPECT_GT(corner.norm(), 0.0);
+    for (int k = 0; k < 3; ++k)
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 3; ++i) EXPECT_NEAR((s.lattice.point(i, j, k) - clamped.point(i, j, k) - corner).norm(), 0.0, 1e-12);
+    EXPECT_NEAR((s.lattice.evaluate(clamped.parameter_of(p)) - (p + Eigen::Vector3d(0.1, 0.1, -0.05))).norm(), 0.0, 1e-9);
+}
+
+TEST(Constraints, InconsistentSetMatchesDenseWeightedLeastSquares) {
+    const Eigen::Vector3d p(0.4, -0.5, 0.7), q(0.9, -1.2, 0.4);
+    const std::vector<Constraint> cs{move(p, p + Eigen::Vector3d(0.1, 0, 0), 1.0), move(p, p + Eigen::Vector3d(0, 0.2, 0), 3.0),
+                                     move(q, q + Eigen::Vector3d(0, 0, 0.05), 2.0)};
+    const ConstraintSolution s = solve_constraints(kRest, cs);
+    EXPECT_TRUE(s.least_squares);
+    // Independent dense solve: minimise sum w |B_c x - d_c|^2 + lambda |x|^2 over all control points.
+    const Eigen::MatrixXd B = basis_matrix(kRest, {p, p, q});
+    const Eigen::Vector3d w(1, 3, 2);
+    Eigen::MatrixXd D(3, 3);
+    for (int c = 0; c < 3; ++c) D.row(c) = (cs[std::size_t(c)].to - cs[std::size_t(c)].point).transpose();
+    // The solver's zero-velocity weight: 1e-6 times the mean squared row norm of the touched columns.
+    const double lambda = 1e-6 * B.rowwise().squaredNorm().mean();
+    const Eigen::MatrixXd lhs = B.transpose() * w.asDiagonal() * B + lambda * Eigen::MatrixXd::Identity(B.cols(), B.cols());
+    const Eigen::MatrixXd expected = lhs.ldlt().solve(B.transpose() * w.asDiagonal() * D);
+    // The reference's normal equations with lambda ~ 1e-6 lose about six digits: agree to 1e-6 on moves of ~0.1.
+    EXPECT_LE((displacement(kRest, s.lattice) - expected).cwiseAbs().maxCoeff(), 1e-6);
+    // The conflicting pair meets in the weighted mean of its wishes.
+    const Eigen::Vector3d achieved = s.lattice.evaluate(kRest.parameter_of(p)) - p;
+    EXPECT_NEAR(achieved.x(), 0.1 * 1 / 4, 1e-4);
+    EXPECT_NEAR(achieved.y(), 0.2 * 3 / 4, 1e-4);
+    EXPECT_GT(s.residuals[0], 0.01);
+}
+
+TEST(Constraints, PinsStayExactInLeastSquares) {
+    const Eigen::Vector3d p(0.4, -0.5, 0.7), anchor(0.6, -0.4, 0.6);
+    const ConstraintSolution s =
+        solve_constraints(kRest, {move(p, p + Eigen::Vector3d(0.2, 0, 0), 1.0), move(p, p + Eigen::Vector3d(0.1, 0, 0), 1.0), pin(anchor)});
+    EXPECT_TRUE(s.least_squares);
+    EXPECT_LE(s.residuals[2], 1e-12);
+    EXPECT_LE((s.lattice.evaluate(kRest.parameter_of(anchor)) - anchor).norm(), 1e-12);
+    EXPECT_NEAR((s.lattice.evaluate(kRest.parameter_of(p)) - p).x(), 0.15, 1e-3);
+}
+
+TEST(Constraints, PointOnTheDomainBoundaryMoves) {
+    const auto r = kRest.regions();
+    const Eigen::Vector3d corner = kRest.evaluate(Eigen::Vector3d(r[0], r[1], r[2])); // the far corner, closed domain
+    const ConstraintSolution s = solve_constraints(kRest, {move(corner, corner + Eigen::Vector3d(0.1, 0, 0))});
+    EXPECT_NEAR((s.lattice.evaluate(Eigen::Vector3d(r[0], r[1], r[2])) - corner - Eigen::Vector3d(0.1, 0, 0)).norm(), 0.0, 1e-12);
+}
+
+TEST(Constraints, RejectsPointsOutsideAndBadIndices) {
+    EXPECT_THROW(solve_constraints(kRest, {move({50, 0, 0}, {51, 0, 0})}), InvalidInput);
+    Constraint c;
+    c.kind = ConstraintKind::control_point;
+    c.control_point = {7, 0, 0};
+    EXPECT_THROW(solve_constraints(kRest, {c}), InvalidInput);
+    EXPECT_THROW(solve_constraints(kRest, {move({0.1, 0.1, 0.1}, {0.2, 0.1, 0.1}, -1.0)}), InvalidInput);
+    EXPECT_THROW(solve_constraints(kRest, {}), InvalidInput);
+}
+
+} // namespace
+} // namespace voxwarp
