@@ -109,3 +109,37 @@ DistanceStats symmetric_distance(const TriangleMesh& a, const TriangleMesh& b, c
 }
 
 } // namespace voxwarp
+
+#include <numbers>
+#include <unordered_map>
+
+namespace voxwarp {
+
+std::vector<double> distances_to_surface(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& mesh) {
+    return surface_distance_internal::distances(points, mesh);
+}
+
+CreaseStats count_creases(const TriangleMesh& mesh, double threshold_degrees) {
+    TriangleMesh storage;
+    const auto& tris = all_triangles(mesh, storage);
+    std::unordered_map<std::uint64_t, std::vector<std::size_t>> edge_faces;
+    for (std::size_t f = 0; f < tris.size(); ++f)
+        for (int c = 0; c < 3; ++c) {
+            const auto a = std::uint32_t(tris[f][std::size_t(c)]), b = std::uint32_t(tris[f][std::size_t((c + 1) % 3)]);
+            edge_faces[(std::uint64_t(std::min(a, b)) << 32) | std::max(a, b)].push_back(f);
+        }
+    auto normal = [&](std::size_t f) {
+        const auto& t = tris[f];
+        return Eigen::Vector3d((mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).normalized());
+    };
+    const double cos_threshold = std::cos(threshold_degrees * std::numbers::pi / 180.0);
+    CreaseStats stats;
+    for (const auto& [key, faces] : edge_faces) {
+        if (faces.size() != 2) continue;
+        ++stats.edges;
+        if (normal(faces[0]).dot(normal(faces[1])) < cos_threshold) ++stats.creased;
+    }
+    return stats;
+}
+
+} // namespace voxwarp

@@ -136,7 +136,7 @@ EditScript parse_edit_script(const std::string& text, const std::string& source)
     json root;
     try {
         root = json::parse(text);
-    } catch (const json::parse_error& e) {
+    } catch (const json::exception& e) { // parse_error, and out_of_range for numbers such as 1e999
         ctx.fail("", std::string("not valid JSON: ") + e.what());
     }
     if (!root.is_object()) ctx.fail("", "expected a JSON object with \"edits\", got " + describe(root));

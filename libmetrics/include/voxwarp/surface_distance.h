@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 namespace voxwarp {
 
@@ -26,5 +27,21 @@ DistanceStats one_sided_distance(const TriangleMesh& from, const TriangleMesh& t
 
 /// Both directions pooled: samples of a measured against b and samples of b measured against a.
 DistanceStats symmetric_distance(const TriangleMesh& a, const TriangleMesh& b, const SurfaceDistanceOptions& options = {});
+
+} // namespace voxwarp
+
+namespace voxwarp {
+
+/// Distance from each world point to the surface of `mesh` (CGAL AABB tree), world units. @throw InvalidInput
+/// when the mesh has no non-degenerate faces.
+std::vector<double> distances_to_surface(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& mesh);
+
+/// Edges whose dihedral angle (angle between the two faces' normals) exceeds a threshold: a mesh's creases.
+struct CreaseStats {
+    std::int64_t creased = 0; ///< interior edges above the threshold
+    std::int64_t edges = 0;   ///< interior (two-face) edges considered
+    double share() const { return edges > 0 ? double(creased) / double(edges) : 0.0; }
+};
+CreaseStats count_creases(const TriangleMesh& mesh, double threshold_degrees = 30.0);
 
 } // namespace voxwarp

@@ -1,0 +1,131 @@
+// End to end: mesh in, constraints, deformed mesh out, measured against the analytic answer in voxels.
+#include "test_helpers.h"
+
+#include "pipeline.h"
+
+#include <voxwarp/errors.h>
+#include <voxwarp/mesh_io.h>
+#include <voxwarp/surface_distance.h>
+
+#include <gtest/gtest.h>
+
+namespace voxwarp {
+namespace {
+
+Constraint move(const Eigen::Vector3d& p, const Eigen::Vector3d& to, const std::string& name = "move") {
+    Constraint c;
+    c.kind = ConstraintKind::move, c.point = p, c.to = to, c.name = name;
+    return c;
+}
+
+Constraint pin(const Eigen::Vector3d& p) {
+    Constraint c;
+    c.kind = ConstraintKind::pin, c.point = c.to = p, c.name = "pin";
+    return c;
+}
+
+TEST(Deform, MoveLandsTheSurfaceOnTheTargetAndPinsStay) {
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 4);
+    EditScript script;
+    const Eigen::Vector3d target(1.35, 0.1, 0.0), pin_a(-1, 0, 0), pin_b(0, -1, 0);
+    script.edits.push_back({{move({1, 0, 0}, target), pin(pin_a), pin(pin_b)}});
+    DeformOptions options;
+    options.voxelize.resolution = 64;
+    DeformReport report;
+    const TriangleMesh out = deform_mesh(sphere, script, options, report);
+    const double h = report.voxel_size;
+    const auto d = distances_to_surface({target, pin_a, pin_b}, out);
+    EXPECT_LE(d[0] / h, 0.5);
+    EXPECT_LE(d[1] / h, 0.5);
+    EXPECT_LE(d[2] / h, 0.5);
+    EXPECT_EQ(topology(out).boundary_edges, 0);
+    EXPECT_EQ(topology(out).euler, 2);
+    ASSERT_EQ(report.edits.size(), 1u);
+    for (const auto& c : report.edits[0].constraints) EXPECT_LE(c.residual_voxels, 0.01);
+}
+
+TEST(Deform, DenseConsistentSetReproducesTheTranslation) {
+    const Eigen::Vector3d centre(0.2, -0.1, 0.3), shift(0.25, -0.15, 0.1);
+    const TriangleMesh sphere = test::sphere_mesh(centre, 1.0, 4);
+    EditScript script;
+    script.lattice.size = {4, 4, 4}; // 64 unknowns, 120 constraints: over-determined
+    Edit edit;
+    for (int i = 0; i < 120; ++i) { // Fibonacci points on the sphere
+        const double z = 1 - 2 * (i + 0.5) / 120, r = std::sqrt(1 - z * z), phi = i * std::numbers::pi * (3 - std::sqrt(5.0));
+        const Eigen::Vector3d p = centre + Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z);
+        edit.constraints.push_back(move(p, p + shift));
+    }
+    script.edits.push_back(edit);
+    DeformOptions options;
+    options.voxelize.resolution = 48;
+    DeformReport report;
+    const TriangleMesh out = deform_mesh(sphere, script, options, report);
+    EXPECT_TRUE(report.edits[0].least_squares);
+    double sum = 0;
+    for (const auto& v : out.vertices) sum += std::abs((v - centre - shift).norm() - 1.0);
+    EXPECT_LE(sum / double(out.vertices.size()) / report.voxel_size, 0.25);
+}
+
+TEST(Deform, VolumeModeCreasesLessThanVertexMode) {
+    const TriangleMesh bar = read_mesh(test::data_path("bar.obj"));
+    const EditScript script = read_edit_file(test::data_path("bar_bend.json"));
+    DeformOptions options;
+    options.voxelize.resolution = 96;
+    DeformReport volume_report, vertex_report;
+    const TriangleMesh volume = deform_mesh(bar, script, options, volume_report);
+    const TriangleMesh vertex = deform_vertices(bar, script, options, vertex_report);
+    const CreaseStats a = count_creases(volume), b = count_creases(vertex);
+    std::printf("bar bend, edges above 30 degrees: volume %lld of %lld (%.2f%%), vertex %lld of %lld (%.2f%%)\n", (long long)a.creased,
+                (long long)a.edges, 100 * a.share(), (long long)b.creased, (long long)b.edges, 100 * b.share());
+    EXPECT_LT(a.share(), b.share());
+    EXPECT_EQ(topology(volume).boundary_edges, 0);
+}
+
+TEST(Deform, FarAwayConstraintIsRefused) {
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 2);
+    EditScript script;
+    script.edits.push_back({{move({9, 0, 0}, {10, 0, 0}, "edits[0].constraints[0]")}});
+    DeformReport report;
+    try {
+        deform_mesh(sphere, script, {}, report);
+        FAIL() << "expected InvalidInput";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("edits[0].constraints[0]"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("far outside"), std::string::npos) << e.what();
+    }
+}
+
+TEST(EditFile, MalformedScriptsNameThePathAndWhatWasExpected) {
+    const std::vector<std::pair<std::string, std::string>> cases{
+        {"{", "not valid JSON"},
+        {"[]", "expected a JSON object"},
+        {R"({"edits": []})", "edits: expected a non-empty array"},
+        {R"({"edits": [{"constraints": [{"move": [0, 0], "to": [1, 1, 1]}]}]})", "edits[0].constraints[0].move: expected an array of three finite numbers"},
+        {R"({"edits": [{"constraints": [{"move": [0, 0, 0]}]}]})", "edits[0].constraints[0]: missing field \"to\""},
+        {R"({"edits": [{"constraints": [{"mvoe": [0, 0, 0], "to": [1, 1, 1]}]}]})", "edits[0].constraints[0]: expected exactly one of"},
+        {R"({"edits": [{"constraints": [{"pin": [0, 0, 0], "extra": 1}]}]})", "edits[0].constraints[0].extra: unknown field"},
+        {R"({"edits": [{"constraints": [{"pin": [0, 0, 0], "weight": -2}]}]})", "edits[0].constraints[0].weight: expected a number > 0"},
+        {R"({"edits": [{"constraints": [{"control_point": [1, 2], "offset": [0, 0, 0]}]}]})", "edits[0].constraints[0].control_point: expected an array of three integers"},
+        {R"({"lattice": {"size": 3}, "edits": [{"constraints": [{"pin": [0, 0, 0]}]}]})", "lattice.size: control points per axis must be in [4, 64]"},
+        {R"({"lattice": {"placement": "bent"}, "edits": [{"constraints": [{"pin": [0, 0, 0]}]}]})", "lattice.placement: expected \"uniform\" or \"clamped\""},
+        {R"({"lattice": {"padding": "wide"}, "edits": [{"constraints": [{"pin": [0, 0, 0]}]}]})", "lattice.padding: expected a number"},
+        {R"({"edits": [{"constraints": [{"move": [0, 0, 1e999], "to": [1, 1, 1]}]}]})", "not valid JSON"},
+    };
+    for (const auto& [text, expected] : cases) {
+        try {
+            parse_edit_script(text, "edit.json");
+            ADD_FAILURE() << "accepted: " << text;
+        } catch (const InvalidInput& e) {
+            const std::string message = e.what();
+            EXPECT_EQ(message.rfind("edit.json: ", 0), 0u) << message;
+            EXPECT_NE(message.find(expected), std::string::npos) << "message: " << message << "\nexpected to contain: " << expected;
+        }
+    }
+}
+
+TEST(EditFile, BundledExamplesParse) {
+    for (const char* name : {"bunny_ear.json", "bar_bend.json", "snowden_nose.json"}) EXPECT_NO_THROW(read_edit_file(test::data_path(name))) << name;
+}
+
+} // namespace
+} // namespace voxwarp
