@@ -19,13 +19,57 @@ openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap) {
 }
 
 openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap) {
-    using DenseT = openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ>;
-    const openvdb::CoordBBox box(openvdb::Coord(0, 0, 0),
-                                 openvdb::Coord(int(voxmap.dims[0] - 1), int(voxmap.dims[1] - 1), int(voxmap.dims[2] - 1)));
-    // Dense only reads through this pointer here; its API wants a mutable one.
-    DenseT dense(box, const_cast<float*>(voxmap.density.data()));
+    // Classify the voxmap's 8^3 blocks (aligned with OpenVDB's leaves) in parallel: all background, uniform
+    // (a tile), or mixed (a leaf, built in parallel). Only the tree insertions are serial. copyFromDense did
+    // the same job visiting every voxel through the tree, and was a seventh of a 512^3 round trip.
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    constexpr std::int64_t B = LeafT::DIM;
+    const auto [nx, ny, nz] = voxmap.dims;
+    const std::int64_t bx = (nx + B - 1) / B, by = (ny + B - 1) / B, bz = (nz + B - 1) / B;
+    const std::size_t blocks = std::size_t(bx * by * bz);
+    std::vector<LeafT*> leaves(blocks, nullptr);
+    std::vector<float> tile(blocks, 0.0f);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            const std::int64_t i0 = std::int64_t(b % std::size_t(bx)) * B, j0 = std::int64_t((b / std::size_t(bx)) % std::size_t(by)) * B,
+                               k0 = std::int64_t(b / std::size_t(bx * by)) * B;
+            auto value = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+                return i < nx && j < ny && k < nz ? voxmap.at(i, j, k) : 0.0f; // past the voxmap: background
+            };
+            const float first = value(i0, j0, k0);
+            bool uniform = true;
+            for (std::int64_t k = k0; k < k0 + B && uniform; ++k)
+                for (std::int64_t j = j0; j < j0 + B && uniform; ++j)
+                    for (std::int64_t i = i0; i < i0 + B; ++i)
+                        if (value(i, j, k) != first) {
+                            uniform = false;
+                            break;
+                        }
+            if (uniform) {
+                tile[b] = first;
+                continue;
+            }
+            auto* leaf = new LeafT(openvdb::Coord(int(i0), int(j0), int(k0)), 0.0f, false);
+            for (std::int64_t k = 0; k < B; ++k)
+                for (std::int64_t j = 0; j < B; ++j)
+                    for (std::int64_t i = 0; i < B; ++i) {
+                        const float v = value(i0 + i, j0 + j, k0 + k);
+                        if (v != 0.0f) leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(int(i0 + i), int(j0 + j), int(k0 + k))), v);
+                    }
+            leaves[b] = leaf;
+        }
+    });
     auto grid = openvdb::FloatGrid::create(0.0f);
-    openvdb::tools::copyFromDense(dense, *grid, 0.0f);
+    auto& tree = grid->tree();
+    for (std::size_t b = 0; b < blocks; ++b) {
+        if (leaves[b]) {
+            tree.addLeaf(leaves[b]);
+        } else if (tile[b] != 0.0f) {
+            const openvdb::Coord origin(int(std::int64_t(b % std::size_t(bx)) * B), int(std::int64_t((b / std::size_t(bx)) % std::size_t(by)) * B),
+                                        int(std::int64_t(b / std::size_t(bx * by)) * B));
+            tree.addTile(1, origin, tile[b], true); // level 1: a tile the size of one leaf
+        }
+    }
     grid->setTransform(voxmap_transform(voxmap));
     return grid;
 }

@@ -2,6 +2,7 @@
 #include <voxwarp/voxmap.h>
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <cmath>
@@ -13,7 +14,9 @@ Voxmap::Voxmap(std::array<std::int64_t, 3> d, const Eigen::Vector3d& o, double h
     for (int a = 0; a < 3; ++a)
         if (dims[a] <= 0) throw InvalidInput("voxmap: dimension " + std::to_string(a) + " is " + std::to_string(dims[a]) + ", expected > 0");
     if (!(h > 0) || !std::isfinite(h)) throw InvalidInput("voxmap: voxel size " + std::to_string(h) + ", expected a finite value > 0");
-    density.assign(std::size_t(voxel_count()), 0.0f);
+    density.resize(std::size_t(voxel_count()));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, density.size(), 1 << 18),
+                      [&](const auto& r) { std::fill(density.begin() + std::ptrdiff_t(r.begin()), density.begin() + std::ptrdiff_t(r.end()), 0.0f); });
 }
 
 float Voxmap::sample(const Eigen::Vector3d& p) const {

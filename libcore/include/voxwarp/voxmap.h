@@ -11,18 +11,45 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace voxwarp {
+
+/// Allocator that leaves new floats uninitialised: a voxmap of 10^8 voxels is filled by the parallel loop
+/// that computes it (or zeroed in parallel by Voxmap's constructor), not memset on one core first.
+template <class T>
+struct DefaultInitAllocator : std::allocator<T> {
+    template <class U>
+    struct rebind {
+        using other = DefaultInitAllocator<U>;
+    };
+    DefaultInitAllocator() = default;
+    template <class U>
+    DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+
+/// Dense density storage; `resize` leaves new values uninitialised.
+using DensityArray = std::vector<float, DefaultInitAllocator<float>>;
 
 struct Voxmap {
     std::array<std::int64_t, 3> dims{0, 0, 0}; ///< voxel counts along x, y, z (64-bit: products overflow 32 bits)
     Eigen::Vector3d origin = Eigen::Vector3d::Zero(); ///< world position of the centre of voxel (0, 0, 0)
     double voxel_size = 1.0;                          ///< h, world units per voxel edge
-    std::vector<float> density;                       ///< dims[0]*dims[1]*dims[2] values in [0, 1], x fastest
+    DensityArray density;                             ///< dims[0]*dims[1]*dims[2] values in [0, 1], x fastest
 
     Voxmap() = default;
-    /// A zero-filled voxmap. @throw InvalidInput for non-positive dims or voxel size.
+    /// A zero-filled voxmap (zeroed in parallel). @throw InvalidInput for non-positive dims or voxel size.
     Voxmap(std::array<std::int64_t, 3> dims, const Eigen::Vector3d& origin, double voxel_size);
 
     std::int64_t voxel_count() const { return dims[0] * dims[1] * dims[2]; }
