@@ -8,7 +8,33 @@
 #include <cmath>
 #include <string>
 
+#include <sys/mman.h>
+
+#include <cstdlib>
+#include <new>
+
 namespace voxwarp {
+
+namespace {
+constexpr std::size_t kLarge = std::size_t(4) << 20, kHugePage = std::size_t(2) << 20;
+}
+
+void* allocate_large(std::size_t bytes) {
+    if (bytes < kLarge) return ::operator new(bytes);
+    const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+    void* p = std::aligned_alloc(kHugePage, rounded);
+    if (!p) throw std::bad_alloc();
+    madvise(p, rounded, MADV_HUGEPAGE); // a hint: without transparent huge pages this changes nothing
+    return p;
+}
+
+void release_large(void* p, std::size_t bytes) noexcept {
+    if (!p) return;
+    if (bytes < kLarge)
+        ::operator delete(p);
+    else
+        std::free(p);
+}
 
 Voxmap::Voxmap(std::array<std::int64_t, 3> d, const Eigen::Vector3d& o, double h) : dims(d), origin(o), voxel_size(h) {
     for (int a = 0; a < 3; ++a)

@@ -67,17 +67,23 @@ struct Cell {
     std::int32_t weight, value;
 };
 
+struct ReleaseCells {
+    std::size_t bytes = 0;
+    void operator()(Cell* p) const noexcept { release_large(p, bytes); }
+};
+
 /// Fixed-point accumulators over a box of the (infinite) target grid.
 struct Accumulator {
     Box box;
     Index3 dims{0, 0, 0};
-    std::unique_ptr<Cell[]> cells;
+    std::unique_ptr<Cell[], ReleaseCells> cells;
     std::size_t size = 0;
     void allocate(const Box& b) {
         box = b;
         for (std::size_t i = 0; i < 3; ++i) dims[i] = b.hi[i] - b.lo[i] + 1;
         size = std::size_t(dims[0] * dims[1] * dims[2]);
-        cells.reset(new Cell[size]); // uninitialised: zeroed below in parallel, so both cores take the page faults
+        cells = std::unique_ptr<Cell[], ReleaseCells>(static_cast<Cell*>(allocate_large(size * sizeof(Cell))), ReleaseCells{size * sizeof(Cell)});
+        // Uninitialised until here: zeroed in parallel, so both cores take the (huge-page) faults.
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, size, 1 << 18), [&](const auto& r) {
             std::fill(cells.get() + r.begin(), cells.get() + r.end(), Cell{0, 0});
         });

@@ -18,10 +18,19 @@
 
 namespace voxwarp {
 
+/// Memory for big arrays (>= 4 MiB): 2 MiB-aligned and marked for transparent huge pages, because first-touch
+/// page faults at 4 KiB dominated filling a 512^3 voxmap on a virtual machine. Smaller requests use operator new.
+/// Pair every call with release_large(p, bytes) of the same size. @throw std::bad_alloc.
+void* allocate_large(std::size_t bytes);
+void release_large(void* p, std::size_t bytes) noexcept;
+
 /// Allocator that leaves new floats uninitialised: a voxmap of 10^8 voxels is filled by the parallel loop
 /// that computes it (or zeroed in parallel by Voxmap's constructor), not memset on one core first.
 template <class T>
 struct DefaultInitAllocator : std::allocator<T> {
+    using value_type = T;
+    T* allocate(std::size_t n) { return static_cast<T*>(allocate_large(n * sizeof(T))); }
+    void deallocate(T* p, std::size_t n) noexcept { release_large(p, n * sizeof(T)); }
     template <class U>
     struct rebind {
         using other = DefaultInitAllocator<U>;
