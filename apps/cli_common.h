@@ -17,6 +17,7 @@ enum Exit : int { ok = 0, usage = 1, bad_input = 2, resource_limit = 3, solver_f
 /// Options every subcommand shares.
 struct Global {
     bool quiet = false;
+    int threads = 0; ///< 0 = all cores
 };
 
 /// A progress callback printing "voxwarp: stage 40%" lines to stderr (throttled), or nothing when quiet.
@@ -32,5 +33,6 @@ void add_extract(CLI::App& app, Global& global, Action& action);
 void add_info(CLI::App& app, Global& global, Action& action);
 void add_deform(CLI::App& app, Global& global, Action& action);
 void add_warp(CLI::App& app, Global& global, Action& action);
+void add_compare(CLI::App& app, Global& global, Action& action);
 
 } // namespace voxwarp::cli

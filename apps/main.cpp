@@ -3,7 +3,10 @@
 
 #include <voxwarp/errors.h>
 
+#include <tbb/global_control.h>
+
 #include <chrono>
+#include <memory>
 #include <cstdio>
 #include <iostream>
 #include <mutex>
@@ -50,12 +53,15 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", "voxwarp 0.1.0");
     Global global;
     app.add_flag("-q,--quiet", global.quiet, "No progress or notes on stderr");
+    app.add_option("-j,--threads", global.threads, "Worker threads (default: all cores); results are byte-identical for any count")
+        ->check(CLI::Range(1, 1024));
     Action action;
     add_voxelize(app, global, action);
     add_extract(app, global, action);
     add_info(app, global, action);
     add_deform(app, global, action);
     add_warp(app, global, action);
+    add_compare(app, global, action);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -63,6 +69,8 @@ int main(int argc, char** argv) {
         return code == 0 ? Exit::ok : Exit::usage;
     }
     try {
+        std::unique_ptr<tbb::global_control> limit;
+        if (global.threads > 0) limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, std::size_t(global.threads));
         action();
         return Exit::ok;
     } catch (const InvalidInput& e) {

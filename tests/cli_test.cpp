@@ -99,5 +99,25 @@ TEST_F(Cli, DeformWritesMeshAndReport) {
     EXPECT_NE(text.str().find("\"peak_resident_bytes\""), std::string::npos);
 }
 
+TEST_F(Cli, DeformIsByteIdenticalForAnyThreadCount) {
+    const std::string args = " deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -r 64 -q -o ";
+    ASSERT_EQ(run("--threads 1" + args + file("one.obj")).code, 0);
+    ASSERT_EQ(run("--threads 2" + args + file("two.obj")).code, 0);
+    auto bytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        std::stringstream text;
+        text << in.rdbuf();
+        return text.str();
+    };
+    const std::string one = bytes(file("one.obj"));
+    EXPECT_GT(one.size(), 1000u);
+    EXPECT_TRUE(one == bytes(file("two.obj")));
+}
+
+TEST_F(Cli, CompareReportsJson) {
+    const Outcome r = run("compare " + test::data_path("bunny.obj") + " " + test::data_path("bunny.obj") + " --json --samples 1000");
+    EXPECT_EQ(r.code, 0) << r.err;
+}
+
 } // namespace
 } // namespace voxwarp
