@@ -80,7 +80,7 @@ Voxmap deform_voxmap(Voxmap voxmap, const EditScript& script, const DeformOption
         check_near(constraints, lo, hi, options.far_fraction);
         EditReport er;
         auto t = Clock::now();
-        WarpDomain domain = make_domain(voxmap, script.lattice, options.voxelize.max_memory_bytes);
+        WarpDomain domain = make_domain(std::move(voxmap), script.lattice, options.voxelize.max_memory_bytes); // refilled by the warp below
         ConstraintSolution solution;
         er.steps = plan_steps(domain.lattice, constraints, options.max_steps, solution, er.folds_remain);
         record(er, solution, constraints, er.steps, h);
@@ -88,7 +88,7 @@ Voxmap deform_voxmap(Voxmap voxmap, const EditScript& script, const DeformOption
         for (int s = 0; s < er.steps; ++s) {
             if (s > 0) {
                 t = Clock::now();
-                domain = make_domain(voxmap, script.lattice, options.voxelize.max_memory_bytes);
+                domain = make_domain(std::move(voxmap), script.lattice, options.voxelize.max_memory_bytes);
                 solution = solve_constraints(domain.lattice, step_constraints(constraints, s, er.steps));
                 report.seconds_solve += seconds_since(t);
             }

@@ -24,7 +24,7 @@ void check_spec(const LatticeSpec& spec) {
 
 } // namespace
 
-WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64_t max_memory_bytes) {
+WarpDomain make_domain(Voxmap input, const LatticeSpec& spec, std::uint64_t max_memory_bytes) {
     check_spec(spec);
     if (input.voxel_count() <= 0 || input.density.size() != std::size_t(input.voxel_count())) throw InvalidInput("warp: the voxmap is empty");
     const double h = input.voxel_size;
@@ -42,16 +42,10 @@ WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64
             dims[a] = std::int64_t(d.granularity[a]) * regions;
             offset[a] = (dims[a] - input.dims[a]) / 2;
         }
-        require_memory(voxmap_bytes(dims) * 2 + voxmap_bytes(input.dims), max_memory_bytes,
-                       "warp domain of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
         const Eigen::Vector3d origin = input.origin - h * Eigen::Vector3d(double(offset[0]), double(offset[1]), double(offset[2]));
-        d.voxmap = Voxmap(dims, origin, h);
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, input.dims[2]), [&](const auto& r) {
-            for (std::int64_t k = r.begin(); k != r.end(); ++k)
-                for (std::int64_t j = 0; j < input.dims[1]; ++j)
-                    std::copy_n(&input.density[std::size_t(input.index(0, j, k))], input.dims[0],
-                                &d.voxmap.density[std::size_t(d.voxmap.index(offset[0], j + offset[1], k + offset[2]))]);
-        });
+        d.voxmap = std::move(input); // last use of input
+        d.offset = offset;
+        d.dims = dims;
         d.lattice = Lattice::uniform(spec.size, origin,
                                      h * Eigen::Vector3d(d.granularity[0], d.granularity[1], d.granularity[2]));
         return d;
@@ -64,12 +58,13 @@ WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64
         d.granularity[a] = int(std::max<std::int64_t>(1, (2 * input.dims[a] + regions - 1) / regions));
         dims[a] = std::int64_t(d.granularity[a]) * regions;
     }
-    require_memory(voxmap_bytes(dims) * 3 + voxmap_bytes(input.dims), max_memory_bytes,
+    require_memory(voxmap_bytes(dims) + voxmap_bytes(input.dims), max_memory_bytes,
                    "captured warp domain of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
     const Eigen::Vector3d lo = input.origin, hi = input.world(double(input.dims[0] - 1), double(input.dims[1] - 1), double(input.dims[2] - 1));
     d.lattice = Lattice::clamped(spec.size, lo, hi);
     const Eigen::Vector3d spacing = (hi - lo).cwiseQuotient(Eigen::Vector3d(double(dims[0]), double(dims[1]), double(dims[2])));
     d.voxmap = Voxmap(dims, lo, spacing.maxCoeff());
+    d.dims = dims;
     // Capture: domain[e] = source(B(e / G)), trilinear in the source.
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, dims[2]), [&](const auto& r) {
         for (std::int64_t k = r.begin(); k != r.end(); ++k)

@@ -8,7 +8,6 @@
 namespace voxwarp {
 
 Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
-    const auto& dm = domain.voxmap;
     const double h = domain.target_voxel_size;
     const auto regions = lattice.regions();
     // Each voxel is mapped with its own region's polynomial; its face neighbours too (extrapolated at the
@@ -43,13 +42,13 @@ Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
         mass = box > 0 ? std::min(1.0, std::abs(edges.col(0).dot(edges.col(1).cross(edges.col(2)))) / box) : 0.0;
     };
     auto for_each_voxel = [&](auto&& visit) {
-        for (std::int64_t g = 0; g < dm.dims[2]; ++g)
-            for (std::int64_t f = 0; f < dm.dims[1]; ++f)
-                for (std::int64_t e = 0; e < dm.dims[0]; ++e) {
+        for (std::int64_t g = 0; g < domain.dims[2]; ++g)
+            for (std::int64_t f = 0; f < domain.dims[1]; ++f)
+                for (std::int64_t e = 0; e < domain.dims[0]; ++e) {
                     Eigen::Vector3d lo, hi;
                     double mass;
                     splat_box(e, f, g, lo, hi, mass);
-                    visit(lo, hi, mass, double(dm.at(e, f, g)));
+                    visit(lo, hi, mass, double(domain.density(e, f, g)));
                 }
     };
     // Pass 1: the target's bounds.

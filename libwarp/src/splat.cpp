@@ -111,10 +111,13 @@ inline VoxelImage voxel_image(const Eigen::Vector3d& centre, const Eigen::Vector
     return {centre - half, centre + half, box > 0 ? std::min(1.0, det / box) : 0.0};
 }
 
-/// Mapped voxel centres of one region plus a one-voxel halo, in target index units, for one thread.
+/// Per-thread scratch for mapping one region: the z-contracted control points of the region, and a ring of
+/// three mapped z-slices (a splat needs its voxel's neighbours one slice up and down). Streaming slices keeps
+/// the working set at 3 (G+2)^2 points, in cache even for G ~ 130, where a whole region's map (G+2)^3 would not be.
 struct RegionScratch {
-    std::vector<Eigen::Vector3d> position; // (G+2)^3, x fastest, local index l+1 for l in [-1, G]
-    std::vector<Eigen::Vector3d> partial_z, partial_yz;
+    std::vector<Eigen::Vector3d> partial_z;  // (G+2) x 16: control points contracted with the z basis
+    std::vector<Eigen::Vector3d> partial_yz; // (G+2) x 4 for one slice
+    std::array<std::vector<Eigen::Vector3d>, 3> slice; // mapped centres of slices, (G+2)^2 each, x fastest
 };
 
 class Splatter {
@@ -137,8 +140,10 @@ public:
     std::size_t region_index(int a, int b, int c) const { return std::size_t(a) + std::size_t(regions_[0]) * (std::size_t(b) + std::size_t(regions_[1]) * std::size_t(c)); }
     bool active(std::size_t r) const { return active_[r] != 0; }
 
-    /// Map the region's voxel centres (with halo) through `lattice` into scratch.position.
-    void map_region(const Lattice& lattice, int a, int b, int c, RegionScratch& s) const {
+    /// Map the region through `lattice` slice by slice and visit each of its voxels with its splat box
+    /// [lo, hi] (target index units), mass share and density.
+    template <class F>
+    void for_each_box(const Lattice& lattice, int a, int b, int c, RegionScratch& s, F&& visit) const {
         const int gx = domain_.granularity[0], gy = domain_.granularity[1], gz = domain_.granularity[2];
         const std::size_t nx = std::size_t(gx) + 2, ny = std::size_t(gy) + 2, nz = std::size_t(gz) + 2;
         Eigen::Vector3d P[4][4][4];
@@ -152,51 +157,51 @@ public:
                 for (int i = 0; i < 4; ++i)
                     s.partial_z[g * 16 + std::size_t(i * 4 + j)] = bz[0] * P[i][j][0] + bz[1] * P[i][j][1] + bz[2] * P[i][j][2] + bz[3] * P[i][j][3];
         }
-        s.partial_yz.resize(nz * ny * 4);
-        for (std::size_t g = 0; g < nz; ++g)
+        s.partial_yz.resize(ny * 4);
+        auto map_slice = [&](std::size_t g, std::vector<Eigen::Vector3d>& out) {
+            out.resize(nx * ny);
             for (std::size_t f = 0; f < ny; ++f) {
                 const auto& by = table_[1][f];
                 const Eigen::Vector3d* r = &s.partial_z[g * 16];
                 for (int i = 0; i < 4; ++i)
-                    s.partial_yz[(g * ny + f) * 4 + std::size_t(i)] = by[0] * r[i * 4 + 0] + by[1] * r[i * 4 + 1] + by[2] * r[i * 4 + 2] + by[3] * r[i * 4 + 3];
+                    s.partial_yz[f * 4 + std::size_t(i)] = by[0] * r[i * 4 + 0] + by[1] * r[i * 4 + 1] + by[2] * r[i * 4 + 2] + by[3] * r[i * 4 + 3];
             }
-        s.position.resize(nx * ny * nz);
-        for (std::size_t g = 0; g < nz; ++g)
             for (std::size_t f = 0; f < ny; ++f) {
-                const Eigen::Vector3d* q = &s.partial_yz[(g * ny + f) * 4];
-                Eigen::Vector3d* out = &s.position[(g * ny + f) * nx];
+                const Eigen::Vector3d* q = &s.partial_yz[f * 4];
+                Eigen::Vector3d* row = &out[f * nx];
                 for (std::size_t e = 0; e < nx; ++e) {
                     const auto& bx = table_[0][e];
-                    out[e] = bx[0] * q[0] + bx[1] * q[1] + bx[2] * q[2] + bx[3] * q[3];
+                    row[e] = bx[0] * q[0] + bx[1] * q[1] + bx[2] * q[2] + bx[3] * q[3];
                 }
             }
-    }
-
-    /// Visit each voxel of a mapped region with its splat box [lo, hi] (target index units).
-    template <class F>
-    void for_each_box(int a, int b, int c, const RegionScratch& s, F&& f) const {
-        const int gx = domain_.granularity[0], gy = domain_.granularity[1], gz = domain_.granularity[2];
-        const std::size_t nx = std::size_t(gx) + 2, nxy = nx * (std::size_t(gy) + 2);
-        const auto& dm = domain_.voxmap;
-        for (int l = 0; l < gz; ++l)
+        };
+        map_slice(0, s.slice[0]);
+        map_slice(1, s.slice[1]);
+        for (int l = 0; l < gz; ++l) {
+            map_slice(std::size_t(l) + 2, s.slice[std::size_t(l + 2) % 3]);
+            const auto& below = s.slice[std::size_t(l) % 3];
+            const auto& here = s.slice[std::size_t(l + 1) % 3];
+            const auto& above = s.slice[std::size_t(l + 2) % 3];
+            const std::int64_t g = std::int64_t(c) * gz + l;
             for (int m = 0; m < gy; ++m) {
-                const std::int64_t row = dm.index(std::int64_t(a) * gx, std::int64_t(b) * gy + m, std::int64_t(c) * gz + l);
+                const std::int64_t e0 = std::int64_t(a) * gx, f = std::int64_t(b) * gy + m;
                 for (int n = 0; n < gx; ++n) {
-                    const std::size_t p = std::size_t(n + 1) + nx * std::size_t(m + 1) + nxy * std::size_t(l + 1);
-                    const Eigen::Vector3d& centre = s.position[p];
-                    const Eigen::Vector3d ex = 0.5 * (s.position[p + 1] - s.position[p - 1]);
-                    const Eigen::Vector3d ey = 0.5 * (s.position[p + nx] - s.position[p - nx]);
-                    const Eigen::Vector3d ez = 0.5 * (s.position[p + nxy] - s.position[p - nxy]);
+                    const std::size_t p = std::size_t(n + 1) + nx * std::size_t(m + 1);
+                    const Eigen::Vector3d& centre = here[p];
+                    const Eigen::Vector3d ex = 0.5 * (here[p + 1] - here[p - 1]);
+                    const Eigen::Vector3d ey = 0.5 * (here[p + nx] - here[p - nx]);
+                    const Eigen::Vector3d ez = 0.5 * (above[p] - below[p]);
                     const VoxelImage image = voxel_image(centre, ex, ey, ez);
-                    f(centre, image.lo, image.hi, dm.density[std::size_t(row + n)], image.mass);
+                    visit(centre, image.lo, image.hi, domain_.density(e0 + n, f, g), image.mass);
                 }
             }
+        }
     }
 
     /// Target-index bounds the region's splats (or preview points) touch.
-    Box region_box(int a, int b, int c, const RegionScratch& s, bool preview) const {
+    Box region_box(const Lattice& lattice, int a, int b, int c, RegionScratch& s, bool preview) const {
         Box box;
-        for_each_box(a, b, c, s, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float, double) {
+        for_each_box(lattice, a, b, c, s, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float, double) {
             Index3 l, u;
             for (std::size_t i = 0; i < 3; ++i) {
                 if (preview) {
@@ -212,8 +217,8 @@ public:
     }
 
     /// Add (sign = +1) or remove (sign = -1) a mapped region's contributions.
-    void splat_region(int a, int b, int c, const RegionScratch& s, bool preview, int sign, Accumulator& acc) const {
-        for_each_box(a, b, c, s, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float density, double mass) {
+    void splat_region(const Lattice& lattice, int a, int b, int c, RegionScratch& s, bool preview, int sign, Accumulator& acc) const {
+        for_each_box(lattice, a, b, c, s, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float density, double mass) {
             if (preview) {
                 const std::int64_t t = acc.index(floor_index(centre.x() + 0.5), floor_index(centre.y() + 0.5), floor_index(centre.z() + 0.5));
                 acc.cells[std::size_t(t)].weight += sign * std::int32_t(kFixedOne);
@@ -266,6 +271,7 @@ private:
     /// density lands unless the map compresses space more than twofold: it is skipped.
     void find_active_regions() {
         const auto& dm = domain_.voxmap;
+        const auto& off = domain_.offset;
         active_.assign(region_count(), 0);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, region_count()), [&](const auto& range) {
             for (std::size_t r = range.begin(); r != range.end(); ++r) {
@@ -273,9 +279,10 @@ private:
                           c = int(r / (std::size_t(regions_[0]) * std::size_t(regions_[1])));
                 const int ga = domain_.granularity[0], gb = domain_.granularity[1], gc = domain_.granularity[2];
                 bool any = false;
-                for (std::int64_t k = std::max<std::int64_t>(0, std::int64_t(c) * gc - 2); !any && k < std::min<std::int64_t>(dm.dims[2], std::int64_t(c + 1) * gc + 2); ++k)
-                    for (std::int64_t j = std::max<std::int64_t>(0, std::int64_t(b) * gb - 2); !any && j < std::min<std::int64_t>(dm.dims[1], std::int64_t(b + 1) * gb + 2); ++j)
-                        for (std::int64_t i = std::max<std::int64_t>(0, std::int64_t(a) * ga - 2); i < std::min<std::int64_t>(dm.dims[0], std::int64_t(a + 1) * ga + 2); ++i)
+                // The region and a two-voxel margin, in the voxmap's own indices (outside it is padding: zero).
+                for (std::int64_t k = std::max<std::int64_t>(0, std::int64_t(c) * gc - 2 - off[2]); !any && k < std::min<std::int64_t>(dm.dims[2], std::int64_t(c + 1) * gc + 2 - off[2]); ++k)
+                    for (std::int64_t j = std::max<std::int64_t>(0, std::int64_t(b) * gb - 2 - off[1]); !any && j < std::min<std::int64_t>(dm.dims[1], std::int64_t(b + 1) * gb + 2 - off[1]); ++j)
+                        for (std::int64_t i = std::max<std::int64_t>(0, std::int64_t(a) * ga - 2 - off[0]); i < std::min<std::int64_t>(dm.dims[0], std::int64_t(a + 1) * ga + 2 - off[0]); ++i)
                             if (dm.at(i, j, k) != 0.0f) {
                                 any = true;
                                 break;
@@ -333,8 +340,7 @@ struct Warp::State {
             auto& s = scratch.local();
             for (std::size_t q = range.begin(); q != range.end(); ++q) {
                 const auto [a, b, c] = unpack(regions[q]);
-                splatter->map_region(lattice, a, b, c, s);
-                boxes[regions[q]] = splatter->region_box(a, b, c, s, options.preview);
+                boxes[regions[q]] = splatter->region_box(lattice, a, b, c, s, options.preview);
             }
         });
     }
@@ -359,8 +365,7 @@ struct Warp::State {
             auto work = [&](std::size_t q) {
                 auto& s = scratch.local();
                 const auto [a, b, c] = unpack(batch[q]);
-                splatter->map_region(lattice, a, b, c, s);
-                splatter->splat_region(a, b, c, s, options.preview, sign, acc);
+                splatter->splat_region(lattice, a, b, c, s, options.preview, sign, acc);
             };
             if (disjoint)
                 tbb::parallel_for(tbb::blocked_range<std::size_t>(0, batch.size(), 1), [&](const auto& range) {

@@ -35,22 +35,32 @@ struct LatticeSpec {
     double padding = 0.25;                  ///< uniform: the lattice reaches this fraction of the data's extent beyond it on each side
 };
 
-/// A domain voxmap aligned with a lattice's regions, ready to warp.
+/// A domain aligned with a lattice's regions, ready to warp. Domain voxel (e, f, g) sits at parameter
+/// (e/Gx, f/Gy, g/Gz) and holds voxmap voxel (e, f, g) - offset, or 0 outside the voxmap: the zero padding the
+/// lattice needs around the data is never stored.
 struct WarpDomain {
-    Voxmap voxmap;                     ///< density at parameter (e/Gx, f/Gy, g/Gz); origin/voxel_size = its undeformed world frame
+    Voxmap voxmap;                     ///< the data (uniform: the input itself; clamped: its capture, offset 0)
+    std::array<std::int64_t, 3> offset{}; ///< domain index of voxmap voxel (0, 0, 0)
+    std::array<std::int64_t, 3> dims{};   ///< domain voxels per axis: G * (n - 3)
     Lattice lattice;                   ///< the undeformed lattice
     std::array<int, 3> granularity{};  ///< G per axis: domain voxels per region edge
     Eigen::Vector3d target_origin;     ///< a world point on the target grid (the input voxmap's voxel (0,0,0) centre)
     double target_voxel_size = 1;      ///< target voxel size, world units (the input's)
+
+    /// Density of domain voxel (e, f, g); 0 in the padding.
+    float density(std::int64_t e, std::int64_t f, std::int64_t g) const {
+        e -= offset[0], f -= offset[1], g -= offset[2];
+        if (e < 0 || f < 0 || g < 0 || e >= voxmap.dims[0] || f >= voxmap.dims[1] || g >= voxmap.dims[2]) return 0.0f;
+        return voxmap.at(e, f, g);
+    }
 };
 
-/// Build the domain for a voxmap. Uniform placement: the input is copied, zero-padded, into a grid of
-/// G * (n - 3) voxels per axis aligned with the input's voxels (no resampling: the undeformed warp is the
-/// identity). Clamped placement: the input is *captured* (pulled back through the undeformed clamped map,
+/// Build the domain for a voxmap. Uniform placement: a grid of G * (n - 3) voxels per axis aligned with the
+/// input's voxels, the input centred in it (no copy, no resampling: the undeformed warp is the identity). Clamped placement: the input is *captured* (pulled back through the undeformed clamped map,
 /// paper section 5) into a domain of about twice the input's resolution per axis.
 /// @throw InvalidInput for an empty voxmap or a bad spec; ResourceLimit when the domain would exceed max_memory_bytes
 ///        (0 = 90 % of available memory).
-WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64_t max_memory_bytes = 0);
+WarpDomain make_domain(Voxmap input, const LatticeSpec& spec, std::uint64_t max_memory_bytes = 0);
 
 struct WarpOptions {
     bool preview = false; ///< the paper's "map and round off": each voxel centre lands in one target voxel (fast, aliased)

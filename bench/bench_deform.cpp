@@ -1,0 +1,22 @@
+// End to end: the bundled ear-stretch edit on the bunny (voxelize + solve + warp + extract), beside
+// OpenVDB's plain round trip (BM_RoundTripOpenVDB in bench_roundtrip.cpp) in the same run.
+#include "bench_common.h"
+#include "pipeline.h"
+
+#include <benchmark/benchmark.h>
+
+namespace voxwarp::bench {
+
+static void BM_Deform(benchmark::State& state) {
+    const TriangleMesh& bunny = bunny_mesh();
+    static const EditScript script = read_edit_file(std::string(VOXWARP_DATA_DIR) + "/bunny_ear.json");
+    DeformOptions options;
+    options.voxelize.resolution = int(state.range(0));
+    for (auto _ : state) {
+        DeformReport report;
+        benchmark::DoNotOptimize(deform_mesh(bunny, script, options, report));
+    }
+}
+BENCHMARK(BM_Deform)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+} // namespace voxwarp::bench
