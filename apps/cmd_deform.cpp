@@ -99,7 +99,10 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
         ->check(CLI::IsMember({"volume", "vertex"}))
         ->capture_default_str();
     cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas")->capture_default_str();
-    cmd->add_flag("--quads", a->options.extract.quads, "Keep quads instead of triangles");
+    auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Keep quads instead of triangles");
+    cmd->add_option("--faces", a->options.target_faces, "Decimate the output to about this many triangles (CGAL edge collapse)")
+        ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40))
+        ->excludes(quads);
     cmd->callback([a, &global, &action] {
         action = [a, &global] {
             const auto start = std::chrono::steady_clock::now();

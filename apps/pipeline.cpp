@@ -1,5 +1,6 @@
 #include "pipeline.h"
 
+#include <voxwarp/decimate.h>
 #include <voxwarp/errors.h>
 #include <voxwarp/foldover.h>
 
@@ -116,6 +117,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     ExtractOptions eo = options.extract;
     eo.progress = options.progress;
     TriangleMesh out = extract(voxmap, eo);
+    if (options.target_faces > 0) out = decimate(out, options.target_faces);
     report.seconds_extract = seconds_since(t);
     if (out.face_count() == 0) throw InvalidInput("deform: the deformed volume has no surface left (was the model thinner than a voxel?)");
     return out;

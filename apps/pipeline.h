@@ -16,6 +16,7 @@ struct DeformOptions {
     VoxelizeOptions voxelize;      ///< resolution / voxel size of the volume
     ExtractOptions extract;
     bool preview = false;          ///< map-and-round warp (fast, aliased)
+    std::size_t target_faces = 0;  ///< > 0: decimate the extracted mesh to about this many faces (CGAL edge collapse)
     int max_steps = 8;             ///< most steps one edit may be split into to avoid folding the lattice map
     double far_fraction = 0.25;    ///< constraint points farther than this fraction of the model's size from its box are refused
     ProgressCallback progress;

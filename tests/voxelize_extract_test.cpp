@@ -1,6 +1,7 @@
 // Round trips mesh -> voxmap -> mesh against analytic answers, tolerances in voxel units.
 #include "test_helpers.h"
 
+#include <voxwarp/decimate.h>
 #include <voxwarp/errors.h>
 #include <voxwarp/extract.h>
 #include <voxwarp/mesh_io.h>
@@ -129,6 +130,21 @@ TEST(RoundTrip, SnowdenScanBecomesClosedSolidWithoutTunnels) {
     std::printf("snowden@256 input->output distance: mean %.4f p99 %.4f max %.4f (voxels)\n", d.mean / h, d.p99 / h, d.max / h);
     EXPECT_LE(d.mean / h, 0.1);
     EXPECT_LE(d.p99 / h, 1.0);
+}
+
+TEST(Decimate, ReachesTheTargetAndKeepsTheSphere) {
+    const Voxmap voxmap = voxelize(test::sphere_mesh({0, 0, 0}, 1.0, 5), {.resolution = 64});
+    const TriangleMesh full = extract(voxmap);
+    ASSERT_GT(full.triangles.size(), 20000u);
+    const TriangleMesh coarse = decimate(full, 2000);
+    EXPECT_LE(coarse.triangles.size(), 2000u);
+    EXPECT_GE(coarse.triangles.size(), 1800u);
+    expect_closed_manifold(coarse);
+    EXPECT_EQ(topology(coarse).euler, 2);
+    double worst = 0;
+    for (const auto& v : coarse.vertices) worst = std::max(worst, std::abs(v.norm() - 1.0) / voxmap.voxel_size);
+    EXPECT_LE(worst, 0.5); // vertices stay on the sphere; the flat faces between them are chords
+    EXPECT_THROW(decimate(full, 2), InvalidInput);
 }
 
 TEST(Voxelize, ResolutionSetsTheVoxelSize) {
