@@ -72,6 +72,53 @@ TEST(MeshIO, BadFilesNameTheProblem) {
     EXPECT_THROW(read_mesh(write("mesh.xyz", "1 2 3\n")), InvalidInput);
 }
 
+// Every input the fuzzers once choked on (tests/fuzz/regressions/mesh; first byte picks the format as in
+// fuzz_mesh_reader) must now be read or refused with InvalidInput, promptly (ctest's timeout catches a hang).
+TEST(MeshIO, FuzzRegressionsFailCleanly) {
+    TempDir dir;
+    const fs::path folder = fs::path(VOXWARP_DATA_DIR) / ".." / "tests" / "fuzz" / "regressions" / "mesh";
+    int count = 0;
+    for (const auto& entry : fs::directory_iterator(folder)) {
+        std::ifstream in(entry.path(), std::ios::binary);
+        std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        ASSERT_FALSE(bytes.empty());
+        static const char* extensions[] = {".obj", ".off", ".ply", ".stl"};
+        const std::string path = dir.file("case" + std::string(extensions[std::uint8_t(bytes[0]) % 4]));
+        std::ofstream(path, std::ios::binary) << bytes.substr(1);
+        try {
+            read_mesh(path);
+        } catch (const InvalidInput&) {
+        }
+        ++count;
+    }
+    EXPECT_GT(count, 0);
+}
+
+TEST(MeshIO, HeadersClaimingMoreThanTheFileHoldsAreRefused) {
+    TempDir dir;
+    auto write = [&](const std::string& name, const std::string& text) {
+        std::ofstream(dir.file(name), std::ios::binary) << text;
+        return dir.file(name);
+    };
+    EXPECT_THROW(read_mesh(write("huge.off", "OFF\n1000000000 1 0\n0 0 0\n")), InvalidInput);
+    EXPECT_THROW(read_mesh(write("huge.ply", "ply\nformat ascii 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\n"
+                                             "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n")),
+                 InvalidInput);
+    std::string stl(80, ' ');
+    const std::uint32_t lying = 1000;
+    stl.append(reinterpret_cast<const char*>(&lying), 4);
+    stl.append(50, '\0');
+    try {
+        read_mesh(write("lying.stl", stl));
+        FAIL() << "expected InvalidInput";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("declares 1000 triangles"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(read_mesh(write("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")), InvalidInput);
+    EXPECT_THROW(read_mesh(write("two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n")), InvalidInput);
+    EXPECT_THROW(read_mesh(write("negative.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -7\n")), InvalidInput);
+}
+
 TEST(VdbIO, WriteThenReadIsLossless) {
     TempDir dir;
     const Voxmap voxmap = voxelize(test::torus_mesh({0, 0, 0}, 1.0, 0.4, 120, 60), {.resolution = 32});

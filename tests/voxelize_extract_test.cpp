@@ -159,8 +159,12 @@ TEST(Voxelize, RejectsImpossibleRequests) {
     const TriangleMesh box = test::box_mesh({0, 0, 0}, {1, 1, 1}, 2);
     EXPECT_THROW(voxelize(box, {.resolution = 0}), InvalidInput);
     EXPECT_THROW(voxelize(box, {.voxel_size = -1}), InvalidInput);
-    EXPECT_THROW(voxelize(box, {.voxel_size = 1e-9}), ResourceLimit);
-    EXPECT_THROW(voxelize(box, {.voxel_size = 1e-12}), InvalidInput);
+    EXPECT_THROW(voxelize(box, {.voxel_size = 1e-9}), InvalidInput); // below float precision for unit coordinates
+    EXPECT_THROW(voxelize(box, {.voxel_size = 2e-4}), ResourceLimit); // 5000^3 voxels
+    TriangleMesh degenerate; // only zero-area faces: nothing enclosed
+    degenerate.vertices = {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}};
+    degenerate.triangles = {{0, 1, 2}};
+    EXPECT_THROW(voxelize(degenerate, {}), InvalidInput);
     EXPECT_THROW(voxelize(box, {.resolution = 2000, .max_memory_bytes = 1 << 20}), ResourceLimit);
     EXPECT_THROW(voxelize(TriangleMesh{}, {}), InvalidInput);
 }

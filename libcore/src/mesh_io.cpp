@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstring>
+#include <sstream>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -121,6 +123,89 @@ struct QuietOpenMesh {
     }
 };
 
+/// Refuse files whose headers claim more elements than the file can hold, before an OpenMesh reader loops
+/// over (or reserves for) a billion vertices. Minimum record sizes: ASCII "0 0 0\n" is 6 bytes a vertex,
+/// "3 0 1 2\n" 8 bytes a face; binary records are their properties' sizes.
+void check_declared_counts(const std::string& path, const std::string& ext, std::uintmax_t file_size) {
+    std::ifstream in(path, std::ios::binary);
+    std::string head(std::size_t(std::min<std::uintmax_t>(file_size, 65536)), '\0');
+    in.read(head.data(), std::streamsize(head.size()));
+    head.resize(std::size_t(in.gcount()));
+    auto refuse = [&](std::uint64_t vertices, std::uint64_t faces, std::uint64_t needed, std::uint64_t available) {
+        throw InvalidInput(path + ": header declares " + std::to_string(vertices) + " vertices and " + std::to_string(faces) +
+                           " faces, which need at least " + std::to_string(needed) + " bytes, but the file holds " + std::to_string(available));
+    };
+    if (ext == ".stl") {
+        const bool ascii = head.rfind("solid", 0) == 0 && head.find("facet") != std::string::npos;
+        if (ascii) return;
+        if (file_size < 84) throw InvalidInput(path + ": binary STL shorter than its 84-byte header");
+        std::uint32_t count = 0;
+        std::memcpy(&count, head.data() + 80, 4);
+        if (84 + 50 * std::uint64_t(count) != file_size)
+            throw InvalidInput(path + ": binary STL declares " + std::to_string(count) + " triangles (" + std::to_string(84 + 50 * std::uint64_t(count)) +
+                               " bytes) but the file holds " + std::to_string(file_size) + " bytes");
+        return;
+    }
+    std::istringstream text(head);
+    std::string line;
+    if (ext == ".off") {
+        std::getline(text, line);
+        const bool binary = line.find("BINARY") != std::string::npos;
+        std::string rest = line.find_first_of("0123456789") != std::string::npos && line.rfind("OFF") != std::string::npos
+                               ? line.substr(line.rfind("OFF") + 3)
+                               : "";
+        while (rest.find_first_of("0123456789") == std::string::npos && std::getline(text, line))
+            if (line.empty() || line[0] != '#') rest = line;
+        std::istringstream counts(rest);
+        std::int64_t nv = -1, nf = -1;
+        counts >> nv >> nf;
+        if (nv < 0 || nf < 0) return; // let the reader report what it cannot parse
+        const std::uint64_t needed = binary ? 12 * std::uint64_t(nv) + 16 * std::uint64_t(nf) : 6 * std::uint64_t(nv) + 8 * std::uint64_t(nf);
+        if (needed > file_size) refuse(std::uint64_t(nv), std::uint64_t(nf), needed, file_size);
+        return;
+    }
+    if (ext == ".ply") {
+        bool binary = false;
+        std::uint64_t nv = 0, nf = 0, vertex_bytes = 0;
+        std::string current;
+        std::size_t header_end = std::string::npos;
+        auto type_size = [](const std::string& t) -> std::uint64_t {
+            if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
+            if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
+            if (t == "double" || t == "float64") return 8;
+            return 4;
+        };
+        while (std::getline(text, line)) {
+            std::istringstream words(line);
+            std::string word;
+            words >> word;
+            if (word == "format") {
+                std::string format;
+                words >> format;
+                binary = format != "ascii";
+            } else if (word == "element") {
+                std::uint64_t n = 0;
+                words >> current >> n;
+                if (current == "vertex") nv = n;
+                if (current == "face") nf = n;
+            } else if (word == "property" && current == "vertex") {
+                std::string type;
+                words >> type;
+                vertex_bytes += binary ? type_size(type) : 2;
+            } else if (word == "end_header") {
+                header_end = std::size_t(text.tellg());
+                break;
+            }
+        }
+        // OpenMesh's PLY reader loops forever on a header without end_header (found by fuzzing).
+        if (head.rfind("ply", 0) != 0) throw InvalidInput(path + ": not a PLY file (it does not start with \"ply\")");
+        if (header_end == std::string::npos) throw InvalidInput(path + ": PLY header has no end_header line within its first 64 KiB");
+        const std::uint64_t available = file_size - std::min<std::uint64_t>(file_size, header_end);
+        const std::uint64_t needed = nv * std::max<std::uint64_t>(vertex_bytes, binary ? 12 : 6) + nf * (binary ? 13 : 8);
+        if (needed > available) refuse(nv, nf, needed, available);
+    }
+}
+
 } // namespace mesh_io_internal
 
 using namespace mesh_io_internal;
@@ -139,7 +224,9 @@ TriangleMesh read_mesh(const std::string& path) {
     if (!is_mesh_path(path))
         throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
     if (std::ifstream probe(path, std::ios::binary); !probe) throw IOError(path + ": cannot open for reading");
-    if (fs::file_size(path, ec) == 0) throw InvalidInput(path + ": file is empty");
+    const auto file_size = fs::file_size(path, ec);
+    if (file_size == 0) throw InvalidInput(path + ": file is empty");
+    check_declared_counts(path, lower_extension(path), file_size);
 
     SoupImporter importer;
     IO::Options options;

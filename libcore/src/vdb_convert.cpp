@@ -24,7 +24,7 @@ openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap) {
     // the same job visiting every voxel through the tree, and was a seventh of a 512^3 round trip.
     using LeafT = openvdb::FloatTree::LeafNodeType;
     constexpr std::int64_t B = LeafT::DIM;
-    const auto [nx, ny, nz] = voxmap.dims;
+    const std::int64_t nx = voxmap.dims[0], ny = voxmap.dims[1], nz = voxmap.dims[2];
     const std::int64_t bx = (nx + B - 1) / B, by = (ny + B - 1) / B, bz = (nz + B - 1) / B;
     const std::size_t blocks = std::size_t(bx * by * bz);
     std::vector<LeafT*> leaves(blocks, nullptr);

@@ -10,12 +10,20 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <string>
 
 namespace voxwarp {
 
 namespace voxelize_internal {
+
+/// %g formatting: std::to_string prints 1e-9 as 0.000000.
+std::string format_number(double x) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%g", x);
+    return buffer;
+}
 
 void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
     if (mesh.vertices.empty() || mesh.face_count() == 0) throw InvalidInput("voxelize: the mesh has no faces");
@@ -24,9 +32,17 @@ void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
     if (options.voxel_size <= 0 && (options.resolution < 4 || options.resolution > 8192))
         throw InvalidInput("voxelize: resolution " + std::to_string(options.resolution) + " is outside [4, 8192]");
     if (options.voxel_size < 0 || !std::isfinite(options.voxel_size))
-        throw InvalidInput("voxelize: voxel size " + std::to_string(options.voxel_size) + " must be a finite value > 0");
+        throw InvalidInput("voxelize: voxel size " + format_number(options.voxel_size) + " must be a finite value > 0");
     if (options.ramp_voxels < 0.5 || options.ramp_voxels > 16)
         throw InvalidInput("voxelize: ramp of " + std::to_string(options.ramp_voxels) + " voxels is outside [0.5, 16]");
+    bool any_area = false;
+    TriangleMesh storage;
+    for (const auto& f : all_triangles(mesh, storage))
+        if (f[0] >= 0 && f[1] >= 0 && f[2] >= 0 && (mesh.vertices[std::size_t(f[1])] - mesh.vertices[std::size_t(f[0])]).cross(mesh.vertices[std::size_t(f[2])] - mesh.vertices[std::size_t(f[0])]).squaredNorm() > 0) {
+            any_area = true;
+            break;
+        }
+    if (!any_area) throw InvalidInput("voxelize: every face of the mesh is degenerate (zero area): it encloses nothing");
     if (options.padding_voxels < int(std::ceil(options.ramp_voxels)) + 1 || options.padding_voxels > 1 << 20)
         throw InvalidInput("voxelize: padding of " + std::to_string(options.padding_voxels) + " voxels must be at least ramp + 1 = " +
                            std::to_string(int(std::ceil(options.ramp_voxels)) + 1));
@@ -98,7 +114,7 @@ openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const Wind
 /// `phi` is the dense signed distance, x fastest.
 void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, double orientation, Progress& progress) {
     constexpr std::int64_t spacing = 4;
-    const auto [nx, ny, nz] = phi.dims;
+    const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
     const std::int64_t cx = (nx - 1) / spacing + 2, cy = (ny - 1) / spacing + 2, cz = (nz - 1) / spacing + 2;
     std::vector<float> coarse(std::size_t(cx * cy * cz));
     progress.stage("inside/outside");
@@ -146,7 +162,7 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
 /// The wall then comes out about a voxel thick, its outer faces in place. Returns the voxels changed.
 std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, double orientation, Progress& progress) {
     const double h = phi.voxel_size;
-    const auto [nx, ny, nz] = phi.dims;
+    const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
     const std::array<std::int64_t, 3> stride{1, nx, nx * ny};
     std::vector<float> replacement(phi.density.size(), 0.0f);
     auto inside_value = [h](float value) {
@@ -192,7 +208,7 @@ template <class F>
 void grid_to_dense(const openvdb::FloatGrid& grid, Voxmap& out, F&& f) {
     using LeafT = openvdb::FloatTree::LeafNodeType;
     constexpr std::int64_t B = LeafT::DIM;
-    const auto [nx, ny, nz] = out.dims;
+    const std::int64_t nx = out.dims[0], ny = out.dims[1], nz = out.dims[2];
     const std::int64_t bx = (nx + B - 1) / B, by = (ny + B - 1) / B, bz = (nz + B - 1) / B;
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, bx * by * bz), [&](const auto& range) {
         auto accessor = grid.getConstAccessor();
@@ -226,11 +242,17 @@ Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options) 
     const double longest = b.size().maxCoeff();
     const double h = options.voxel_size > 0 ? options.voxel_size : longest / options.resolution;
     if (!(h > 0)) throw InvalidInput("voxelize: the mesh has zero extent; give --voxel-size");
+    // Positions reach OpenVDB as 32-bit floats: a voxel below about 1e-6 of the coordinates' magnitude cannot be
+    // resolved (the mesh sits far from the origin compared with its size).
+    const double magnitude = std::max(b.min.cwiseAbs().maxCoeff(), b.max.cwiseAbs().maxCoeff());
+    if (h < 1e-6 * magnitude)
+        throw InvalidInput("voxelize: voxel size " + format_number(h) + " is below float precision for coordinates as large as " +
+                           format_number(magnitude) + "; move the mesh near the origin or use a coarser resolution");
     std::array<std::int64_t, 3> dims{};
     for (int a = 0; a < 3; ++a) {
         const double count = std::ceil(b.size()[a] / h) + 1 + 2.0 * options.padding_voxels;
         if (!(count < double(1 << 30)))
-            throw InvalidInput("voxelize: voxel size " + std::to_string(h) + " gives " + std::to_string(count) + " voxels along axis " +
+            throw InvalidInput("voxelize: voxel size " + format_number(h) + " gives " + format_number(count) + " voxels along axis " +
                                std::to_string(a) + ", more than 2^30");
         dims[std::size_t(a)] = std::int64_t(count);
     }
