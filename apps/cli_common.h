@@ -2,6 +2,7 @@
 /// @brief Shared pieces of the voxwarp command line: progress on stderr, exit codes, option helpers.
 #pragma once
 
+#include <voxwarp/errors.h>
 #include <voxwarp/progress.h>
 
 #include <CLI/CLI.hpp>
@@ -25,6 +26,18 @@ ProgressCallback stderr_progress(const Global& global);
 
 /// Print an informational line to stderr unless quiet.
 void note(const Global& global, const std::string& line);
+
+/// Run `f`; an InvalidInput it throws that does not already start with `source` is rethrown prefixed with it,
+/// so every message about bad input names the file it came from.
+template <class F>
+auto naming_source(const std::string& source, F&& f) -> decltype(f()) {
+    try {
+        return f();
+    } catch (const InvalidInput& e) {
+        if (std::string(e.what()).rfind(source, 0) == 0) throw;
+        throw InvalidInput(source + ": " + e.what());
+    }
+}
 
 /// Each subcommand registers itself and sets the action run after parsing.
 using Action = std::function<void()>;

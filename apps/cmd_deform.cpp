@@ -112,7 +112,15 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
             const EditScript script = read_edit_file(a->edits);
             const TriangleMesh mesh = read_mesh(a->input);
             DeformReport report;
-            TriangleMesh out = a->mode == "vertex" ? deform_vertices(mesh, script, a->options, report) : deform_mesh(mesh, script, a->options, report);
+            // Constraint messages name the edit file and JSON path; anything else about the input names the mesh.
+            TriangleMesh out = naming_source(a->input, [&] {
+                try {
+                    return a->mode == "vertex" ? deform_vertices(mesh, script, a->options, report) : deform_mesh(mesh, script, a->options, report);
+                } catch (const InvalidInput& e) {
+                    if (std::string(e.what()).rfind("edits[", 0) == 0) throw InvalidInput(a->edits + ": " + e.what());
+                    throw;
+                }
+            });
             if (a->mode == "volume") report.volume_before = enclosed_volume(mesh.quads.empty() ? mesh : mesh.triangulated()), report.volume_after = enclosed_volume(out);
             write_mesh(out, a->output);
             finish(global, *a, report, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
@@ -133,7 +141,14 @@ void add_warp(CLI::App& app, Global& global, Action& action) {
             const EditScript script = read_edit_file(a->edits);
             Voxmap voxmap = read_vdb(a->input);
             DeformReport report;
-            voxmap = deform_voxmap(std::move(voxmap), script, a->options, report);
+            voxmap = naming_source(a->input, [&] {
+                try {
+                    return deform_voxmap(std::move(voxmap), script, a->options, report);
+                } catch (const InvalidInput& e) {
+                    if (std::string(e.what()).rfind("edits[", 0) == 0) throw InvalidInput(a->edits + ": " + e.what());
+                    throw;
+                }
+            });
             write_vdb(voxmap, a->output);
             finish(global, *a, report, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
         };

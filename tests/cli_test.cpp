@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <tuple>
+#include <vector>
 
 namespace voxwarp {
 namespace {
@@ -97,6 +99,43 @@ TEST_F(Cli, DeformWritesMeshAndReport) {
     EXPECT_NE(text.str().find("\"residual_voxels\""), std::string::npos);
     EXPECT_NE(text.str().find("\"volume_before\""), std::string::npos);
     EXPECT_NE(text.str().find("\"peak_resident_bytes\""), std::string::npos);
+}
+
+// Every class of bad input, through the command line: exit code 2, one line naming the file, no output.
+TEST_F(Cli, EveryClassOfBadInputIsRefusedCleanly) {
+    std::string lying_stl(80, ' ');
+    const std::uint32_t lying = 1000;
+    lying_stl.append(reinterpret_cast<const char*>(&lying), 4);
+    lying_stl.append(50, '\0');
+    const std::vector<std::tuple<std::string, std::string, std::string>> cases{
+        // file name, content, expected words in the message
+        {"empty.obj", "", "file is empty"},
+        {"garbage.off", "this is not an OFF file\n", "garbage.off"},
+        {"nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite"},
+        {"index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "refers to vertex 9"},
+        {"negative.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -9\n", "negative.obj"},
+        {"short.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "short.obj"},
+        {"degenerate.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "zero area"},
+        {"billion.ply", "ply\nformat ascii 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\nproperty float z\n"
+                        "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n", "header declares 1000000000 vertices"},
+        {"billion.off", "OFF\n1000000000 1 0\n0 0 0\n", "header declares 1000000000 vertices"},
+        {"lying.stl", lying_stl, "declares 1000 triangles"},
+        {"far.obj", "v 1e12 0 0\nv 1e12 1 0\nv 1e12 0 1\nv 1e12 1 1\nf 1 2 3\nf 2 4 3\nf 1 3 4\nf 1 4 2\n", "float precision"},
+    };
+    for (const auto& [name, content, expected] : cases) {
+        const std::string input = write(name, content);
+        const Outcome r = run("voxelize " + input + " -o " + file("out.vdb") + " -q");
+        EXPECT_EQ(r.code, 2) << name << ": " << r.err;
+        EXPECT_EQ(lines(r.err), 1) << name << ": " << r.err;
+        EXPECT_NE(r.err.find(name), std::string::npos) << name << ": " << r.err;
+        EXPECT_NE(r.err.find(expected), std::string::npos) << name << ": " << r.err;
+        EXPECT_FALSE(fs::exists(file("out.vdb"))) << name;
+    }
+    // Volumes: not a .vdb, a .vdb without a float grid, a float grid full of NaN.
+    const Outcome junk = run("extract " + write("junk.vdb", "not a vdb") + " -o " + file("out.obj") + " -q");
+    EXPECT_EQ(junk.code, 2) << junk.err;
+    EXPECT_NE(junk.err.find("junk.vdb"), std::string::npos) << junk.err;
+    EXPECT_FALSE(fs::exists(file("out.obj")));
 }
 
 TEST_F(Cli, DeformIsByteIdenticalForAnyThreadCount) {

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdlib>
 #include <cstring>
 #include <sstream>
 #include <cmath>
@@ -135,6 +136,29 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         throw InvalidInput(path + ": header declares " + std::to_string(vertices) + " vertices and " + std::to_string(faces) +
                            " faces, which need at least " + std::to_string(needed) + " bytes, but the file holds " + std::to_string(available));
     };
+    if (ext == ".obj") {
+        // OpenMesh skips a vertex line it cannot parse ("v nan 0 0"), and the faces after it then point at the
+        // wrong vertices: check every vertex line here and name the real problem.
+        std::ifstream obj(path);
+        std::string obj_line;
+        std::size_t line_no = 0, vertex_no = 0;
+        while (std::getline(obj, obj_line)) {
+            ++line_no;
+            if (obj_line.size() < 2 || obj_line[0] != 'v' || (obj_line[1] != ' ' && obj_line[1] != '\t')) continue;
+            ++vertex_no;
+            const char* cursor = obj_line.c_str() + 2;
+            for (int a = 0; a < 3; ++a) {
+                char* end = nullptr;
+                const double x = std::strtod(cursor, &end);
+                if (end == cursor)
+                    throw InvalidInput(path + ": line " + std::to_string(line_no) + ": vertex " + std::to_string(vertex_no) + " needs three numbers");
+                if (!std::isfinite(x))
+                    throw InvalidInput(path + ": line " + std::to_string(line_no) + ": vertex " + std::to_string(vertex_no) + " has a non-finite coordinate");
+                cursor = end;
+            }
+        }
+        return;
+    }
     if (ext == ".stl") {
         const bool ascii = head.rfind("solid", 0) == 0 && head.find("facet") != std::string::npos;
         if (ascii) return;
