@@ -11,6 +11,7 @@
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
+#include <set>
 #include <sstream>
 #include <cmath>
 #include <filesystem>
@@ -199,26 +200,58 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
             if (t == "double" || t == "float64") return 8;
             return 4;
         };
+        // OpenMesh's PLY reader crashes or hangs on malformed headers (a property before any element, no
+        // end_header: both found by fuzzing), so the header's grammar is checked here, line by line.
+        static const std::set<std::string> types{"char", "uchar", "short", "ushort", "int", "uint", "float", "double", "int8", "uint8",
+                                                 "int16", "uint16", "int32", "uint32", "float32", "float64"};
+        std::size_t line_no = 0;
+        bool format_seen = false;
+        auto bad = [&](const std::string& what) {
+            throw InvalidInput(path + ": PLY header line " + std::to_string(line_no) + ": " + what);
+        };
         while (std::getline(text, line)) {
+            ++line_no;
+            if (!line.empty() && line.back() == '\r') line.pop_back();
             std::istringstream words(line);
             std::string word;
             words >> word;
+            if (line_no == 1) {
+                if (word != "ply") bad("expected \"ply\"");
+                continue;
+            }
             if (word == "format") {
-                std::string format;
-                words >> format;
+                std::string format, version;
+                words >> format >> version;
+                if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian") bad("unknown format '" + format + "'");
                 binary = format != "ascii";
+                format_seen = true;
             } else if (word == "element") {
-                std::uint64_t n = 0;
-                words >> current >> n;
+                std::string count_text;
+                words >> current >> count_text;
+                if (current.empty() || count_text.empty() || count_text.find_first_not_of("0123456789") != std::string::npos || count_text.size() > 12)
+                    bad("expected \"element <name> <count>\"");
+                const std::uint64_t n = std::stoull(count_text);
                 if (current == "vertex") nv = n;
                 if (current == "face") nf = n;
-            } else if (word == "property" && current == "vertex") {
-                std::string type;
+            } else if (word == "property") {
+                if (current.empty()) bad("property before any element");
+                std::string type, name;
                 words >> type;
-                vertex_bytes += binary ? type_size(type) : 2;
+                if (type == "list") {
+                    std::string count_type, item_type;
+                    words >> count_type >> item_type >> name;
+                    if (!types.count(count_type) || !types.count(item_type) || name.empty()) bad("expected \"property list <type> <type> <name>\"");
+                } else {
+                    words >> name;
+                    if (!types.count(type) || name.empty()) bad("expected \"property <type> <name>\"");
+                }
+                if (current == "vertex") vertex_bytes += binary ? type_size(type) : 2;
             } else if (word == "end_header") {
+                if (!format_seen) bad("end_header before any format line");
                 header_end = std::size_t(text.tellg());
                 break;
+            } else if (word != "comment" && word != "obj_info" && !word.empty()) {
+                bad("unexpected '" + word + "'");
             }
         }
         // OpenMesh's PLY reader loops forever on a header without end_header (found by fuzzing).
