@@ -9,9 +9,9 @@ namespace voxwarp {
 
 struct WindingNumber::Tree {
     struct Node {
-        Eigen::Vector3d centre;      // area-weighted centroid of the cluster
-        Eigen::Vector3d area_normal; // sum of area * unit normal (= half cross products)
-        Eigen::Matrix3d second;      // sum of area_normal_t (centroid_t - centre)^T, the second-order moment
+        Eigen::Vector3d centre = Eigen::Vector3d::Zero();      // area-weighted centroid of the cluster
+        Eigen::Vector3d area_normal = Eigen::Vector3d::Zero(); // sum of area * unit normal (= half cross products)
+        Eigen::Matrix3d second = Eigen::Matrix3d::Zero();      // sum of area_normal_t (centroid_t - centre)^T, the second-order moment
         double radius = 0;           // farthest triangle vertex from centre
         std::int32_t first = 0, count = 0; // leaf: range in `order`
         std::int32_t left = -1, right = -1;
