@@ -138,26 +138,47 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
                            " faces, which need at least " + std::to_string(needed) + " bytes, but the file holds " + std::to_string(available));
     };
     if (ext == ".obj") {
-        // OpenMesh skips a vertex line it cannot parse ("v nan 0 0"), and the faces after it then point at the
-        // wrong vertices: check every vertex line here and name the real problem.
+        // OpenMesh skips a vertex line it cannot parse ("v nan 0 0"), shifting the faces after it, and asserts on
+        // a face vertex without an index ("f /6 1 4", found by fuzzing): check vertex and face lines here.
         std::ifstream obj(path);
         std::string obj_line;
         std::size_t line_no = 0, vertex_no = 0;
+        std::int64_t max_index = 0;
+        std::size_t max_index_line = 0;
+        auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(line_no) + ": " + what); };
         while (std::getline(obj, obj_line)) {
             ++line_no;
-            if (obj_line.size() < 2 || obj_line[0] != 'v' || (obj_line[1] != ' ' && obj_line[1] != '\t')) continue;
-            ++vertex_no;
-            const char* cursor = obj_line.c_str() + 2;
-            for (int a = 0; a < 3; ++a) {
-                char* end = nullptr;
-                const double x = std::strtod(cursor, &end);
-                if (end == cursor)
-                    throw InvalidInput(path + ": line " + std::to_string(line_no) + ": vertex " + std::to_string(vertex_no) + " needs three numbers");
-                if (!std::isfinite(x))
-                    throw InvalidInput(path + ": line " + std::to_string(line_no) + ": vertex " + std::to_string(vertex_no) + " has a non-finite coordinate");
-                cursor = end;
+            if (obj_line.size() < 2 || (obj_line[1] != ' ' && obj_line[1] != '\t')) continue;
+            if (obj_line[0] == 'v') {
+                ++vertex_no;
+                const char* cursor = obj_line.c_str() + 2;
+                for (int a = 0; a < 3; ++a) {
+                    char* end = nullptr;
+                    const double x = std::strtod(cursor, &end);
+                    if (end == cursor) bad("vertex " + std::to_string(vertex_no) + " needs three numbers");
+                    if (!std::isfinite(x)) bad("vertex " + std::to_string(vertex_no) + " has a non-finite coordinate");
+                    cursor = end;
+                }
+            } else if (obj_line[0] == 'f') {
+                std::istringstream tokens(obj_line.substr(2));
+                std::string token;
+                int corners = 0;
+                while (tokens >> token) {
+                    char* end = nullptr;
+                    const long long index = std::strtoll(token.c_str(), &end, 10);
+                    if (end == token.c_str() || (*end != '\0' && *end != '/')) bad("face vertex '" + token + "' does not start with a vertex index");
+                    if (index == 0) bad("face vertex index 0 (OBJ indices start at 1)");
+                    if (index < 0 && std::uint64_t(-index) > vertex_no)
+                        bad("face vertex index " + std::to_string(index) + " reaches before the first vertex");
+                    if (index > max_index) max_index = index, max_index_line = line_no;
+                    ++corners;
+                }
+                if (corners < 3) bad("face has " + std::to_string(corners) + " vertices, expected at least 3");
             }
         }
+        if (std::uint64_t(max_index) > vertex_no)
+            throw InvalidInput(path + ": line " + std::to_string(max_index_line) + ": face refers to vertex " + std::to_string(max_index) + ", file has " +
+                               std::to_string(vertex_no) + " vertices");
         return;
     }
     if (ext == ".stl") {

@@ -186,6 +186,7 @@ public:
             for (int m = 0; m < gy; ++m) {
                 const std::int64_t e0 = std::int64_t(a) * gx, f = std::int64_t(b) * gy + m;
                 for (int n = 0; n < gx; ++n) {
+                    if (!near(e0 + n, f, g)) continue;
                     const std::size_t p = std::size_t(n + 1) + nx * std::size_t(m + 1);
                     const Eigen::Vector3d& centre = here[p];
                     const Eigen::Vector3d ex = 0.5 * (here[p + 1] - here[p - 1]);
@@ -267,11 +268,57 @@ public:
         });
     }
 private:
-    /// A region whose voxels and a two-voxel margin around them hold no density adds only weight where no
-    /// density lands unless the map compresses space more than twofold: it is skipped.
+    /// Skipping empty space. A domain voxel with no density within kReach voxels only adds weight to target
+    /// voxels that no density reaches (unless the map compresses space about threefold there): it cannot change
+    /// the result, so neither the full warp nor an incremental update splats it (the same rule in both keeps
+    /// them bit-identical). near_ marks the voxels within kReach of density (a separable max filter), over the
+    /// voxmap grown by kReach on every side; a region with no marked voxel is skipped whole.
+    static constexpr std::int64_t kReach = 3;
+
+    bool near(std::int64_t e, std::int64_t f, std::int64_t g) const {
+        const std::int64_t i = e - domain_.offset[0] + kReach, j = f - domain_.offset[1] + kReach, k = g - domain_.offset[2] + kReach;
+        if (i < 0 || j < 0 || k < 0 || i >= near_dims_[0] || j >= near_dims_[1] || k >= near_dims_[2]) return false;
+        return near_[std::size_t(i + near_dims_[0] * (j + near_dims_[1] * k))] != 0;
+    }
+
     void find_active_regions() {
         const auto& dm = domain_.voxmap;
-        const auto& off = domain_.offset;
+        for (std::size_t a = 0; a < 3; ++a) near_dims_[a] = dm.dims[a] + 2 * kReach;
+        const std::int64_t nx = near_dims_[0], ny = near_dims_[1], nz = near_dims_[2];
+        near_.assign(std::size_t(nx * ny * nz), 0);
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, dm.dims[2]), [&](const auto& r) {
+            for (std::int64_t k = r.begin(); k != r.end(); ++k)
+                for (std::int64_t j = 0; j < dm.dims[1]; ++j)
+                    for (std::int64_t i = 0; i < dm.dims[0]; ++i)
+                        near_[std::size_t((i + kReach) + nx * ((j + kReach) + ny * (k + kReach)))] = dm.at(i, j, k) != 0.0f;
+        });
+        // Dilate by kReach along x, then y, then z (a cube of radius kReach).
+        const std::array<std::int64_t, 3> stride{1, nx, nx * ny};
+        for (std::size_t axis = 0; axis < 3; ++axis) {
+            const std::int64_t len = near_dims_[axis], step = stride[axis];
+            const std::int64_t lines = std::int64_t(near_.size()) / len;
+            tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, lines, 256), [&](const auto& r) {
+                std::vector<std::uint8_t> line(static_cast<std::size_t>(len));
+                for (std::int64_t q = r.begin(); q != r.end(); ++q) {
+                    // Line q: all cells sharing the other two coordinates.
+                    std::int64_t base;
+                    if (axis == 0) base = q * nx;
+                    else if (axis == 1) base = (q % nx) + (q / nx) * nx * ny;
+                    else base = q;
+                    for (std::int64_t t = 0; t < len; ++t) line[std::size_t(t)] = near_[std::size_t(base + t * step)];
+                    std::int64_t last = -(kReach + 1);
+                    for (std::int64_t t = 0; t < len; ++t) { // forward: within kReach after a set cell
+                        if (line[std::size_t(t)]) last = t;
+                        if (t - last <= kReach) near_[std::size_t(base + t * step)] = 1;
+                    }
+                    last = len + kReach + 1;
+                    for (std::int64_t t = len - 1; t >= 0; --t) { // backward: within kReach before one
+                        if (line[std::size_t(t)]) last = t;
+                        if (last - t <= kReach) near_[std::size_t(base + t * step)] = 1;
+                    }
+                }
+            });
+        }
         active_.assign(region_count(), 0);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, region_count()), [&](const auto& range) {
             for (std::size_t r = range.begin(); r != range.end(); ++r) {
@@ -279,11 +326,10 @@ private:
                           c = int(r / (std::size_t(regions_[0]) * std::size_t(regions_[1])));
                 const int ga = domain_.granularity[0], gb = domain_.granularity[1], gc = domain_.granularity[2];
                 bool any = false;
-                // The region and a two-voxel margin, in the voxmap's own indices (outside it is padding: zero).
-                for (std::int64_t k = std::max<std::int64_t>(0, std::int64_t(c) * gc - 2 - off[2]); !any && k < std::min<std::int64_t>(dm.dims[2], std::int64_t(c + 1) * gc + 2 - off[2]); ++k)
-                    for (std::int64_t j = std::max<std::int64_t>(0, std::int64_t(b) * gb - 2 - off[1]); !any && j < std::min<std::int64_t>(dm.dims[1], std::int64_t(b + 1) * gb + 2 - off[1]); ++j)
-                        for (std::int64_t i = std::max<std::int64_t>(0, std::int64_t(a) * ga - 2 - off[0]); i < std::min<std::int64_t>(dm.dims[0], std::int64_t(a + 1) * ga + 2 - off[0]); ++i)
-                            if (dm.at(i, j, k) != 0.0f) {
+                for (std::int64_t g = std::int64_t(c) * gc; !any && g < std::int64_t(c + 1) * gc; ++g)
+                    for (std::int64_t f = std::int64_t(b) * gb; !any && f < std::int64_t(b + 1) * gb; ++f)
+                        for (std::int64_t e = std::int64_t(a) * ga; e < std::int64_t(a + 1) * ga; ++e)
+                            if (near(e, f, g)) {
                                 any = true;
                                 break;
                             }
@@ -298,6 +344,8 @@ private:
     std::array<std::vector<std::array<double, 4>>, 3> table_;
     std::array<int, 3> regions_{};
     std::vector<std::uint8_t> active_;
+    std::vector<std::uint8_t> near_;
+    std::array<std::int64_t, 3> near_dims_{};
 };
 
 /// Density of one target voxel from its fixed-point sums (paper: wv if weight < 1, else wv / weight).
