@@ -208,6 +208,41 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         if (nv < 0 || nf < 0) return; // let the reader report what it cannot parse
         const std::uint64_t needed = binary ? 12 * std::uint64_t(nv) + 16 * std::uint64_t(nf) : 6 * std::uint64_t(nv) + 8 * std::uint64_t(nf);
         if (needed > file_size) refuse(std::uint64_t(nv), std::uint64_t(nf), needed, file_size);
+        if (binary) return;
+        // ASCII body: OpenMesh reads a face's vertex count as unsigned, so "-3 0 1 2" becomes four billion
+        // vertices (found by fuzzing). Check every vertex and face line against the header first.
+        std::ifstream off(path);
+        std::string off_line;
+        std::int64_t seen_header = 0, vertices = 0, faces = 0, line_no = 0;
+        auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(line_no) + ": " + what); };
+        while (std::getline(off, off_line) && faces < nf) {
+            ++line_no;
+            const auto first = off_line.find_first_not_of(" \t\r");
+            if (first == std::string::npos || off_line[first] == '#') continue;
+            if (seen_header < 2) { // the OFF keyword line, then the counts line (possibly the same line)
+                seen_header += off_line.find("OFF") != std::string::npos && off_line.find_first_of("0123456789") == std::string::npos ? 1 : 2;
+                continue;
+            }
+            std::istringstream numbers(off_line);
+            if (vertices < nv) {
+                double x[3];
+                for (double& c : x)
+                    if (!(numbers >> c) || !std::isfinite(c)) bad("vertex " + std::to_string(vertices + 1) + " needs three finite numbers");
+                ++vertices;
+                continue;
+            }
+            std::int64_t corners = 0;
+            if (!(numbers >> corners) || corners < 3 || corners > 1000000) bad("face " + std::to_string(faces + 1) + " has a vertex count outside [3, 10^6]");
+            for (std::int64_t q = 0; q < corners; ++q) {
+                std::int64_t index = -1;
+                if (!(numbers >> index) || index < 0 || index >= nv)
+                    bad("face " + std::to_string(faces + 1) + " refers to a vertex outside [0, " + std::to_string(nv) + ")");
+            }
+            ++faces;
+        }
+        if (vertices < nv || faces < nf)
+            throw InvalidInput(path + ": ends after " + std::to_string(vertices) + " of " + std::to_string(nv) + " vertices and " + std::to_string(faces) +
+                               " of " + std::to_string(nf) + " faces");
         return;
     }
     if (ext == ".ply") {
