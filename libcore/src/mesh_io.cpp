@@ -11,6 +11,7 @@
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <cmath>
@@ -195,17 +196,32 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
     std::istringstream text(head);
     std::string line;
     if (ext == ".off") {
+        // Header: a keyword ([ST][C][N][4][n]OFF, optionally followed by BINARY), then "#vertices #faces #edges"
+        // on the same or the next non-comment line. Anything else is refused: OpenMesh reads on regardless.
         std::getline(text, line);
-        const bool binary = line.find("BINARY") != std::string::npos;
-        std::string rest = line.find_first_of("0123456789") != std::string::npos && line.rfind("OFF") != std::string::npos
-                               ? line.substr(line.rfind("OFF") + 3)
-                               : "";
-        while (rest.find_first_of("0123456789") == std::string::npos && std::getline(text, line))
-            if (line.empty() || line[0] != '#') rest = line;
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        std::istringstream first_words(line);
+        std::string keyword, word;
+        first_words >> keyword;
+        static const std::regex off_keyword("^(ST)?C?N?4?n?OFF$");
+        if (!std::regex_match(keyword, off_keyword)) throw InvalidInput(path + ": line 1: expected an OFF keyword, got '" + keyword.substr(0, 20) + "'");
+        bool binary = false;
+        std::string rest;
+        while (first_words >> word) {
+            if (word == "BINARY" && rest.empty())
+                binary = true;
+            else
+                rest += word + " ";
+        }
+        while (rest.empty() && std::getline(text, line)) {
+            const auto start = line.find_first_not_of(" \t\r");
+            if (start != std::string::npos && line[start] != '#') rest = line;
+        }
         std::istringstream counts(rest);
         std::int64_t nv = -1, nf = -1;
-        counts >> nv >> nf;
-        if (nv < 0 || nf < 0) return; // let the reader report what it cannot parse
+        std::string tail;
+        if (!(counts >> nv >> nf) || nv < 0 || nf < 0)
+            throw InvalidInput(path + ": OFF header: expected the vertex and face counts, got '" + rest.substr(0, 40) + "'");
         const std::uint64_t needed = binary ? 12 * std::uint64_t(nv) + 16 * std::uint64_t(nf) : 6 * std::uint64_t(nv) + 8 * std::uint64_t(nf);
         if (needed > file_size) refuse(std::uint64_t(nv), std::uint64_t(nf), needed, file_size);
         if (binary) return;
