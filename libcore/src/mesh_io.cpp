@@ -284,6 +284,8 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         while (std::getline(text, line)) {
             ++line_no;
             if (!line.empty() && line.back() == '\r') line.pop_back();
+            for (unsigned char ch : line)
+                if ((ch < 0x20 && ch != '\t') || ch >= 0x7f) bad("header holds a non-printable byte");
             std::istringstream words(line);
             std::string word;
             words >> word;
@@ -317,6 +319,7 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
                     words >> name;
                     if (!types.count(type) || name.empty()) bad("expected \"property <type> <name>\"");
                 }
+                if (std::string extra; words >> extra) bad("unexpected '" + extra.substr(0, 20) + "' after the property name");
                 if (current == "vertex") vertex_bytes += binary ? type_size(type) : 2;
             } else if (word == "end_header") {
                 if (!format_seen) bad("end_header before any format line");
