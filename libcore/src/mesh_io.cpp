@@ -222,6 +222,9 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         std::string tail;
         if (!(counts >> nv >> nf) || nv < 0 || nf < 0)
             throw InvalidInput(path + ": OFF header: expected the vertex and face counts, got '" + rest.substr(0, 40) + "'");
+        // OpenMesh's ASCII OFF reader hangs on "OFF 0 0" (found by fuzzing); such a file holds nothing anyway.
+        if (nv < 3 || nf < 1)
+            throw InvalidInput(path + ": OFF header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) + " faces: nothing to read");
         const std::uint64_t needed = binary ? 12 * std::uint64_t(nv) + 16 * std::uint64_t(nf) : 6 * std::uint64_t(nv) + 8 * std::uint64_t(nf);
         if (needed > file_size) refuse(std::uint64_t(nv), std::uint64_t(nf), needed, file_size);
         if (binary) return;
@@ -332,6 +335,8 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         // OpenMesh's PLY reader loops forever on a header without end_header (found by fuzzing).
         if (head.rfind("ply", 0) != 0) throw InvalidInput(path + ": not a PLY file (it does not start with \"ply\")");
         if (header_end == std::string::npos) throw InvalidInput(path + ": PLY header has no end_header line within its first 64 KiB");
+        if (nv < 3 || nf < 1)
+            throw InvalidInput(path + ": PLY header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) + " faces: nothing to read");
         const std::uint64_t available = file_size - std::min<std::uint64_t>(file_size, header_end);
         const std::uint64_t needed = nv * std::max<std::uint64_t>(vertex_bytes, binary ? 12 : 6) + nf * (binary ? 13 : 8);
         if (needed > available) refuse(nv, nf, needed, available);
