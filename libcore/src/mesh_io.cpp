@@ -169,7 +169,7 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
                     const long long index = std::strtoll(token.c_str(), &end, 10);
                     if (end == token.c_str() || (*end != '\0' && *end != '/')) bad("face vertex '" + token + "' does not start with a vertex index");
                     if (index == 0) bad("face vertex index 0 (OBJ indices start at 1)");
-                    if (index < 0 && std::uint64_t(-index) > vertex_no)
+                    if (index < 0 && index < -static_cast<long long>(vertex_no)) // no negation: index may be LLONG_MIN
                         bad("face vertex index " + std::to_string(index) + " reaches before the first vertex");
                     if (index > max_index) max_index = index, max_index_line = line_no;
                     ++corners;
