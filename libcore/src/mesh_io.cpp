@@ -149,6 +149,8 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(line_no) + ": " + what); };
         while (std::getline(obj, obj_line)) {
             ++line_no;
+            // OpenMesh trims leading whitespace before it looks at the keyword: so must we (found by fuzzing).
+            obj_line.erase(0, std::min(obj_line.size(), obj_line.find_first_not_of(" \t\r")));
             if (obj_line.size() < 2 || (obj_line[1] != ' ' && obj_line[1] != '\t')) continue;
             if (obj_line[0] == 'v') {
                 ++vertex_no;
