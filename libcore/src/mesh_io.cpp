@@ -149,24 +149,25 @@ void check_declared_counts(const std::string& path, const std::string& ext, std:
         auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(line_no) + ": " + what); };
         while (std::getline(obj, obj_line)) {
             ++line_no;
-            // OpenMesh trims leading whitespace before it looks at the keyword: so must we (found by fuzzing).
-            obj_line.erase(0, std::min(obj_line.size(), obj_line.find_first_not_of(" \t\r")));
-            if (obj_line.size() < 2 || (obj_line[1] != ' ' && obj_line[1] != '\t')) continue;
-            if (obj_line[0] == 'v') {
+            // Read the keyword the way OpenMesh does (stream extraction: any whitespace, leading or after the
+            // keyword, separates; found by fuzzing with indented lines and "f\r/4").
+            std::istringstream fields(obj_line);
+            std::string keyword;
+            fields >> keyword;
+            if (keyword == "v") {
                 ++vertex_no;
-                const char* cursor = obj_line.c_str() + 2;
                 for (int a = 0; a < 3; ++a) {
+                    std::string number;
+                    fields >> number;
                     char* end = nullptr;
-                    const double x = std::strtod(cursor, &end);
-                    if (end == cursor) bad("vertex " + std::to_string(vertex_no) + " needs three numbers");
+                    const double x = std::strtod(number.c_str(), &end);
+                    if (number.empty() || end == number.c_str()) bad("vertex " + std::to_string(vertex_no) + " needs three numbers");
                     if (!std::isfinite(x)) bad("vertex " + std::to_string(vertex_no) + " has a non-finite coordinate");
-                    cursor = end;
                 }
-            } else if (obj_line[0] == 'f') {
-                std::istringstream tokens(obj_line.substr(2));
+            } else if (keyword == "f") {
                 std::string token;
                 int corners = 0;
-                while (tokens >> token) {
+                while (fields >> token) {
                     char* end = nullptr;
                     const long long index = std::strtoll(token.c_str(), &end, 10);
                     if (end == token.c_str() || (*end != '\0' && *end != '/')) bad("face vertex '" + token + "' does not start with a vertex index");
