@@ -126,10 +126,12 @@ struct QuietOpenMesh {
     }
 };
 
-/// Refuse files whose headers claim more elements than the file can hold, before an OpenMesh reader loops
+/// Checks run before OpenMesh reads a file, because its readers crash, assert or hang on malformed input:
+/// counts versus file size, header grammar (PLY, OFF), OBJ vertex and face lines. Header counts first:
+/// refuse files whose headers claim more elements than the file can hold, before an OpenMesh reader loops
 /// over (or reserves for) a billion vertices. Minimum record sizes: ASCII "0 0 0\n" is 6 bytes a vertex,
 /// "3 0 1 2\n" 8 bytes a face; binary records are their properties' sizes.
-void check_declared_counts(const std::string& path, const std::string& ext, std::uintmax_t file_size) {
+void validate_before_openmesh(const std::string& path, const std::string& ext, std::uintmax_t file_size) {
     std::ifstream in(path, std::ios::binary);
     std::string head(std::size_t(std::min<std::uintmax_t>(file_size, 65536)), '\0');
     in.read(head.data(), std::streamsize(head.size()));
@@ -366,7 +368,7 @@ TriangleMesh read_mesh(const std::string& path) {
     if (std::ifstream probe(path, std::ios::binary); !probe) throw IOError(path + ": cannot open for reading");
     const auto file_size = fs::file_size(path, ec);
     if (file_size == 0) throw InvalidInput(path + ": file is empty");
-    check_declared_counts(path, lower_extension(path), file_size);
+    validate_before_openmesh(path, lower_extension(path), file_size);
 
     SoupImporter importer;
     IO::Options options;
