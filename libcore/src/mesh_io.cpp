@@ -305,6 +305,7 @@ void validate_before_openmesh(const std::string& path, const std::string& ext, s
                 std::string format, version;
                 words >> format >> version;
                 if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian") bad("unknown format '" + format + "'");
+                if (version != "1.0") bad("unsupported PLY version '" + version.substr(0, 20) + "', expected 1.0"); // OpenMesh loops on others
                 binary = format != "ascii";
                 format_seen = true;
             } else if (word == "element") {
