@@ -218,6 +218,9 @@ void validate_before_openmesh(const std::string& path, const std::string& ext, s
             else
                 rest += word + " ";
         }
+        // OpenMesh's binary OFF reader loops on malformed bodies (found by fuzzing) and voxwarp has no
+        // validator for them: refuse the rare format rather than hang.
+        if (binary) throw InvalidInput(path + ": binary OFF is not supported; convert it to ASCII OFF, PLY or STL");
         while (rest.empty() && std::getline(text, line)) {
             const auto start = line.find_first_not_of(" \t\r");
             if (start != std::string::npos && line[start] != '#') rest = line;
