@@ -36,6 +36,20 @@ void add_common_options(CLI::App* cmd, DeformArgs& a, bool mesh_input) {
     cmd->add_option("--max-memory", a.max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
 }
 
+/// Run a deform job: messages about a constraint (they start with its JSON path, "edits[...") name the edit
+/// file, any other bad-input message names the input file.
+template <class F>
+auto attributing_errors(const DeformArgs& a, F&& f) -> decltype(f()) {
+    return naming_source(a.input, [&] {
+        try {
+            return f();
+        } catch (const InvalidInput& e) {
+            if (std::string(e.what()).rfind("edits[", 0) == 0) throw InvalidInput(a.edits + ": " + e.what());
+            throw;
+        }
+    });
+}
+
 nlohmann::json report_json(const DeformArgs& a, const DeformReport& r, double seconds) {
     nlohmann::json j;
     j["input"] = a.input;
@@ -112,14 +126,8 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
             const EditScript script = read_edit_file(a->edits);
             const TriangleMesh mesh = read_mesh(a->input);
             DeformReport report;
-            // Constraint messages name the edit file and JSON path; anything else about the input names the mesh.
-            TriangleMesh out = naming_source(a->input, [&] {
-                try {
-                    return a->mode == "vertex" ? deform_vertices(mesh, script, a->options, report) : deform_mesh(mesh, script, a->options, report);
-                } catch (const InvalidInput& e) {
-                    if (std::string(e.what()).rfind("edits[", 0) == 0) throw InvalidInput(a->edits + ": " + e.what());
-                    throw;
-                }
+            TriangleMesh out = attributing_errors(*a, [&] {
+                return a->mode == "vertex" ? deform_vertices(mesh, script, a->options, report) : deform_mesh(mesh, script, a->options, report);
             });
             if (a->mode == "volume") report.volume_before = enclosed_volume(mesh.quads.empty() ? mesh : mesh.triangulated()), report.volume_after = enclosed_volume(out);
             write_mesh(out, a->output);
@@ -141,14 +149,7 @@ void add_warp(CLI::App& app, Global& global, Action& action) {
             const EditScript script = read_edit_file(a->edits);
             Voxmap voxmap = read_vdb(a->input);
             DeformReport report;
-            voxmap = naming_source(a->input, [&] {
-                try {
-                    return deform_voxmap(std::move(voxmap), script, a->options, report);
-                } catch (const InvalidInput& e) {
-                    if (std::string(e.what()).rfind("edits[", 0) == 0) throw InvalidInput(a->edits + ": " + e.what());
-                    throw;
-                }
-            });
+            voxmap = attributing_errors(*a, [&] { return deform_voxmap(std::move(voxmap), script, a->options, report); });
             write_vdb(voxmap, a->output);
             finish(global, *a, report, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
         };
