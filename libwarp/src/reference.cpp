@@ -3,6 +3,8 @@
 #include <voxwarp/basis.h>
 #include <voxwarp/warp.h>
 
+#include "resolve.h"
+
 #include <cmath>
 
 namespace voxwarp {
@@ -10,32 +12,35 @@ namespace voxwarp {
 Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
     const double h = domain.target_voxel_size;
     const auto regions = lattice.regions();
-    // Each voxel is mapped with its own region's polynomial; its face neighbours too (extrapolated at the
-    // region's edge), as the fast path does, so both compute the same map.
-    auto map = [&](const std::array<std::int64_t, 3>& idx, const std::array<int, 3>& region) {
+    // Each voxel is mapped with its own region's polynomial, and its image's edges are the map's derivatives
+    // per voxel step (the Jacobian's columns over G), summed the same 64-term way.
+    auto map = [&](const std::array<std::int64_t, 3>& idx, int derivative_axis) {
+        std::array<int, 3> region;
         std::array<std::array<double, 4>, 3> b;
-        for (std::size_t a = 0; a < 3; ++a) b[a] = cubic_basis(double(idx[a] - std::int64_t(region[a]) * domain.granularity[a]) / domain.granularity[a]);
+        for (std::size_t a = 0; a < 3; ++a) {
+            const int g = domain.granularity[a];
+            region[a] = int(std::min<std::int64_t>(idx[a] / g, regions[a] - 1));
+            const double t = double(idx[a] - std::int64_t(region[a]) * g) / g;
+            b[a] = cubic_basis(t);
+            if (int(a) == derivative_axis) {
+                b[a] = cubic_basis_derivative(t);
+                for (double& v : b[a]) v /= g;
+            }
+        }
         Eigen::Vector3d p = Eigen::Vector3d::Zero();
         for (int k = 0; k < 4; ++k)
             for (int j = 0; j < 4; ++j)
                 for (int i = 0; i < 4; ++i)
                     p += b[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)] * lattice.point(region[0] + i, region[1] + j, region[2] + k);
-        return Eigen::Vector3d((p - domain.target_origin) / h);
+        return Eigen::Vector3d((derivative_axis < 0 ? p - domain.target_origin : p) / h);
     };
-    // The voxel's image: the bounding box of the parallelepiped spanned by the central differences, and the
+    // The voxel's image: the bounding box of the parallelepiped spanned by the Jacobian's columns, and the
     // share |det| / box volume of each overlap that keeps the deposited weight equal to the image's volume.
     auto splat_box = [&](std::int64_t e, std::int64_t f, std::int64_t g, Eigen::Vector3d& lo, Eigen::Vector3d& hi, double& mass) {
-        const std::array<int, 3> region{int(std::min<std::int64_t>(e / domain.granularity[0], regions[0] - 1)),
-                                        int(std::min<std::int64_t>(f / domain.granularity[1], regions[1] - 1)),
-                                        int(std::min<std::int64_t>(g / domain.granularity[2], regions[2] - 1))};
         const std::array<std::int64_t, 3> at{e, f, g};
-        const Eigen::Vector3d c = map(at, region);
+        const Eigen::Vector3d c = map(at, -1);
         Eigen::Matrix3d edges;
-        for (std::size_t axis = 0; axis < 3; ++axis) {
-            auto next = at, previous = at;
-            ++next[axis], --previous[axis];
-            edges.col(int(axis)) = 0.5 * (map(next, region) - map(previous, region));
-        }
+        for (int axis = 0; axis < 3; ++axis) edges.col(axis) = map(at, axis);
         const Eigen::Vector3d half = 0.5 * edges.cwiseAbs().rowwise().sum();
         lo = c - half, hi = c + half;
         const double box = 8.0 * half.prod();
@@ -76,8 +81,14 @@ Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
                     value[t] += w * density;
                 }
     });
-    for (std::size_t t = 0; t < out.density.size(); ++t)
-        out.density[t] = float(std::min(1.0, weight[t] < 1 ? value[t] : value[t] / weight[t]));
+    for (std::int64_t k = 0; k < dims[2]; ++k)
+        for (std::int64_t j = 0; j < dims[1]; ++j) {
+            bool inside = false;
+            for (std::int64_t i = 0; i < dims[0]; ++i) {
+                const std::size_t t = std::size_t(out.index(i, j, k));
+                out.density[t] = warp_internal::resolve_density(weight[t], value[t], 1.0, inside);
+            }
+        }
     return out;
 }
 

@@ -8,14 +8,18 @@
 /// the warped domain.
 ///
 /// Filtering (paper section 6): every target voxel a domain voxel's image overlaps receives weight = overlap
-/// volume / voxel volume and weighted value = weight * density; finally density = wv if weight < 1 else
-/// wv / weight. The image is approximated by the bounding box of the parallelepiped spanned by the mapped
-/// central differences, each overlap scaled by |det| / box volume (the paper's box of six face centres loses a
-/// quarter of the density under a 30 degree rotation; this one deposits each voxel's image volume exactly and
-/// equals the paper's box for translations and axis scalings). Weights are accumulated in
-/// 32-bit fixed point (2^-22), so sums do not depend on order: the result is the same for any thread count,
-/// and an incremental update (subtract a region's old contribution, add its new one) is bit-identical to a
-/// full recompute.
+/// volume / voxel volume and weighted value = weight * density. The image is approximated by the bounding box
+/// of the parallelepiped spanned by the map's Jacobian columns (per voxel step), each overlap scaled by
+/// |det| / box volume (the paper's box of six face centres loses a quarter of the density under a 30 degree
+/// rotation; this one deposits each voxel's image volume exactly and equals the paper's box for translations
+/// and axis scalings). Finally density = wv / weight where weight >= 1; where weight < 1 the paper's wv,
+/// plus the uncovered part filled with material when the voxel lies inside (wv >= weight / 2): the paper
+/// treats uncovered space as empty, which is right at the data's edge but leaves dips inside the solid. Only
+/// the narrow band within 2 voxels of a fractional density is splatted; target voxels no splat reaches take
+/// the side (inside or outside) of the last reached voxel along their x row, which is what the skipped voxels
+/// would have given them. Weights are accumulated in 32-bit fixed point (2^-22), so sums do not depend on order:
+/// the result is the same for any thread count, and an incremental update (subtract a region's old
+/// contribution, add its new one) is bit-identical to a full recompute.
 #pragma once
 
 #include <voxwarp/lattice.h>
