@@ -349,88 +349,86 @@ private:
         for (std::int64_t i = 0; i < n; ++i) row[i] |= other[i];
     }
 
+    /// The mixed voxels of voxmap slice vz, dilated by kReach along x and y, into `slab` (a near-grid z-slab,
+    /// nx x ny bytes). A voxel is mixed when fractional or unlike one of its six face neighbours (0 outside).
+    void mixed_slab(std::int64_t vz, std::vector<std::uint8_t>& slab, std::vector<std::uint8_t>& line, std::vector<float>& here) const {
+        const auto& dm = domain_.voxmap;
+        const std::int64_t nx = near_dims_[0];
+        std::fill(slab.begin(), slab.end(), std::uint8_t(0));
+        if (vz < 0 || vz >= dm.dims[2]) return;
+        const std::vector<float> zeros(std::size_t(dm.dims[0]), 0.0f);
+        auto row = [&](std::int64_t j, std::int64_t k) -> const float* {
+            if (j < 0 || k < 0 || j >= dm.dims[1] || k >= dm.dims[2]) return zeros.data();
+            return &dm.density[std::size_t(dm.index(0, j, k))];
+        };
+        std::vector<std::uint8_t> mixed(static_cast<std::size_t>(nx + 2 * kReach), 0); // near-grid row, kReach more zeros each side
+        for (std::int64_t j = 0; j < dm.dims[1]; ++j) {
+            const float* c = row(j, vz);
+            std::copy(c, c + dm.dims[0], here.begin() + 1); // here[0] and here[n + 1] stay 0
+            const float *s = row(j - 1, vz), *n = row(j + 1, vz), *d = row(j, vz - 1), *u = row(j, vz + 1);
+            std::uint8_t* m = mixed.data() + 2 * kReach;
+            bool any = false;
+            for (std::int64_t i = 0; i < dm.dims[0]; ++i) {
+                const float v = here[std::size_t(i + 1)];
+                m[i] = (v != 0.0f && v != 1.0f) || here[std::size_t(i)] != v || here[std::size_t(i + 2)] != v || s[i] != v || n[i] != v ||
+                       d[i] != v || u[i] != v;
+                any |= m[i] != 0;
+            }
+            if (!any) continue;
+            // Along x into `line`, then OR-ed into the 2 kReach + 1 slab rows it reaches along y.
+            std::fill(line.begin(), line.end(), std::uint8_t(0));
+            for (std::int64_t dx = -kReach; dx <= kReach; ++dx) or_into(line.data(), mixed.data() + kReach + dx, nx);
+            for (std::int64_t dy = -kReach; dy <= kReach; ++dy) or_into(&slab[std::size_t(nx * (j + kReach + dy))], line.data(), nx);
+        }
+    }
+
     void find_band() {
         const auto& dm = domain_.voxmap;
         for (std::size_t a = 0; a < 3; ++a) near_dims_[a] = dm.dims[a] + 2 * kReach;
         const std::int64_t nx = near_dims_[0], ny = near_dims_[1], nz = near_dims_[2];
-        near_.assign(std::size_t(nx * ny * nz), 0);
-        // Mixed voxels, a z-slab at a time: a voxel is compared with its six face neighbours (0 outside the voxmap).
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, dm.dims[2]), [&](const auto& r) {
-            const std::vector<float> zeros(std::size_t(dm.dims[0]) + 2, 0.0f);
-            auto row = [&](std::int64_t j, std::int64_t k) -> const float* { // padded by one zero each side
-                if (j < 0 || k < 0 || j >= dm.dims[1] || k >= dm.dims[2]) return zeros.data() + 1;
-                return &dm.density[std::size_t(dm.index(0, j, k))];
-            };
-            std::vector<float> here(std::size_t(dm.dims[0]) + 2, 0.0f);
-            for (std::int64_t k = r.begin(); k != r.end(); ++k)
-                for (std::int64_t j = 0; j < dm.dims[1]; ++j) {
-                    const float* c = row(j, k);
-                    std::copy(c, c + dm.dims[0], here.begin() + 1);
-                    const float *s = row(j - 1, k), *n = row(j + 1, k), *d = row(j, k - 1), *u = row(j, k + 1);
-                    std::uint8_t* out = &near_[std::size_t(kReach + nx * ((j + kReach) + ny * (k + kReach)))];
-                    for (std::int64_t i = 0; i < dm.dims[0]; ++i) {
-                        const float v = here[std::size_t(i + 1)];
-                        out[i] = (v != 0.0f && v != 1.0f) || here[std::size_t(i)] != v || here[std::size_t(i + 2)] != v || s[i] != v || n[i] != v ||
-                                 d[i] != v || u[i] != v;
-                    }
-                }
-        });
-        // Dilate by kReach (a cube): along x within each row, then along y and z by OR-ing whole rows of a copy,
-        // so every pass streams contiguous memory.
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny * nz), [&](const auto& r) {
-            std::vector<std::uint8_t> line(std::size_t(nx) + 2 * kReach, 0);
-            for (std::int64_t q = r.begin(); q != r.end(); ++q) {
-                std::uint8_t* row = &near_[std::size_t(q * nx)];
-                std::copy(row, row + nx, line.begin() + kReach);
-                for (std::int64_t d = 0; d <= 2 * kReach; ++d)
-                    if (d != kReach) or_into(row, line.data() + d, nx);
-            }
-        });
-        std::vector<std::uint8_t> copy(near_.size());
-        for (const std::int64_t stride : {nx, nx * ny}) { // y, then z: a row's neighbours are rows `stride` apart
-            std::copy(near_.begin(), near_.end(), copy.begin());
-            const std::int64_t span = stride == nx ? ny : nz; // rows along the axis
-            tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny * nz), [&](const auto& r) {
-                for (std::int64_t q = r.begin(); q != r.end(); ++q) {
-                    const std::int64_t at = stride == nx ? q % ny : q / ny; // the row's coordinate along the axis
-                    std::uint8_t* row = &near_[std::size_t(q * nx)];
-                    for (std::int64_t d = -kReach; d <= kReach; ++d) {
-                        if (d == 0 || at + d < 0 || at + d >= span) continue;
-                        or_into(row, &copy[std::size_t(q * nx + d * stride)], nx);
-                    }
-                }
-            });
-        }
-        // Each row's runs of band voxels (compressed rows: the mask itself is dropped), then the regions they reach.
+        // Streamed over z in chunks of slabs, never as a whole mask: each chunk keeps a ring of the
+        // 2 kReach + 1 xy-dilated slabs around its current one, ORs them (the z dilation) and keeps the runs.
+        constexpr std::int64_t kChunk = 32;
+        const std::int64_t chunks = (nz + kChunk - 1) / kChunk;
+        std::vector<std::vector<Run>> chunk_runs(static_cast<std::size_t>(chunks));
         run_offsets_.assign(std::size_t(ny * nz) + 1, 0);
-        auto for_each_run = [&](std::int64_t q, auto&& f) {
-            const std::uint8_t* line = &near_[std::size_t(q * nx)];
-            for (std::int64_t i = 0; i < nx;) {
-                if (!line[i]) {
-                    ++i;
-                    continue;
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, chunks, 1), [&](const auto& r) {
+            const std::size_t slab_bytes = std::size_t(nx * ny);
+            std::vector<std::vector<std::uint8_t>> ring(2 * kReach + 1, std::vector<std::uint8_t>(slab_bytes));
+            std::vector<std::uint8_t> line(static_cast<std::size_t>(nx)), band(slab_bytes);
+            std::vector<float> here(std::size_t(dm.dims[0]) + 2, 0.0f);
+            for (std::int64_t c = r.begin(); c != r.end(); ++c) {
+                const std::int64_t k0 = c * kChunk, k1 = std::min(nz, k0 + kChunk);
+                // Near slab k is voxmap slice k - kReach; ring slot (k mod 2R+1) holds near slab k.
+                for (std::int64_t k = k0 - kReach; k < k0 + kReach; ++k)
+                    mixed_slab(k - kReach, ring[std::size_t((k + 2 * kReach + 1) % (2 * kReach + 1))], line, here);
+                auto& runs = chunk_runs[std::size_t(c)];
+                for (std::int64_t k = k0; k < k1; ++k) {
+                    mixed_slab(k + kReach - kReach, ring[std::size_t((k + kReach) % (2 * kReach + 1))], line, here);
+                    std::fill(band.begin(), band.end(), std::uint8_t(0));
+                    for (const auto& slab : ring) or_into(band.data(), slab.data(), std::int64_t(slab_bytes));
+                    for (std::int64_t j = 0; j < ny; ++j) {
+                        const std::uint8_t* row = &band[std::size_t(j * nx)];
+                        std::uint64_t count = 0;
+                        for (std::int64_t i = 0; i < nx;) {
+                            if (!row[i]) {
+                                ++i;
+                                continue;
+                            }
+                            const std::int64_t start = i;
+                            while (i < nx && row[i]) ++i;
+                            runs.push_back({std::int32_t(start), std::int32_t(i - 1)});
+                            ++count;
+                        }
+                        run_offsets_[std::size_t(j + ny * k) + 1] = count;
+                    }
                 }
-                const std::int64_t start = i;
-                while (i < nx && line[i]) ++i;
-                f(start, i - 1);
-            }
-        };
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny * nz), [&](const auto& r) {
-            for (std::int64_t q = r.begin(); q != r.end(); ++q) {
-                std::uint32_t n = 0;
-                for_each_run(q, [&](std::int64_t, std::int64_t) { ++n; });
-                run_offsets_[std::size_t(q) + 1] = n;
             }
         });
         for (std::size_t q = 1; q < run_offsets_.size(); ++q) run_offsets_[q] += run_offsets_[q - 1];
-        runs_.resize(run_offsets_.back());
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny * nz), [&](const auto& r) {
-            for (std::int64_t q = r.begin(); q != r.end(); ++q) {
-                std::size_t at = run_offsets_[std::size_t(q)];
-                for_each_run(q, [&](std::int64_t first, std::int64_t last) { runs_[at++] = {std::int32_t(first), std::int32_t(last)}; });
-            }
-        });
-        near_ = {};
+        runs_.clear();
+        runs_.reserve(run_offsets_.back());
+        for (const auto& runs : chunk_runs) runs_.insert(runs_.end(), runs.begin(), runs.end());
         active_.assign(region_count(), 0);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, region_count()), [&](const auto& range) {
             for (std::size_t r = range.begin(); r != range.end(); ++r) {
@@ -470,7 +468,6 @@ private:
     std::array<std::vector<BasisEntry>, 3> table_;
     std::array<int, 3> regions_{};
     std::vector<std::uint8_t> active_;
-    std::vector<std::uint8_t> near_;
     std::array<std::int64_t, 3> near_dims_{};
     std::vector<std::uint64_t> run_offsets_; // per near-grid row (j + ny k), into runs_
     std::vector<Run> runs_;
