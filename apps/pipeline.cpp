@@ -96,7 +96,7 @@ Voxmap deform_voxmap(Voxmap voxmap, const EditScript& script, const DeformOption
             t = Clock::now();
             progress.stage("warp edit " + std::to_string(e + 1) + "/" + std::to_string(script.edits.size()) +
                            (er.steps > 1 ? " step " + std::to_string(s + 1) + "/" + std::to_string(er.steps) : ""));
-            voxmap = warp(domain, solution.lattice, {.preview = options.preview, .progress = options.progress});
+            voxmap = warp(std::move(domain), solution.lattice, {.preview = options.preview, .progress = options.progress});
             report.seconds_warp += seconds_since(t);
             progress.report(double(s + 1) / er.steps);
         }

@@ -487,6 +487,7 @@ struct Warp::State {
     std::vector<Box> boxes; // per region, what its current splat touches
     BlockAccumulator acc;
     Voxmap result;
+    DensityArray* recycle = nullptr; // the consumed domain's densities, reusable for the first full() result
 
     std::vector<std::size_t> active_regions() const {
         std::vector<std::size_t> out;
@@ -584,23 +585,30 @@ struct Warp::State {
         for (std::size_t i = 0; i < 3; ++i) all.lo[i] -= 2, all.hi[i] += 2;
         Index3 dims;
         for (std::size_t i = 0; i < 3; ++i) dims[i] = all.hi[i] - all.lo[i] + 1;
-        // The target voxmap and the block table up front; the blocks (the band's image) are not known yet.
-        require_memory(std::uint64_t(dims[0]) * std::uint64_t(dims[1]) * std::uint64_t(dims[2]) * sizeof(float), 0,
-                       "warp target of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
+        // The block table now, the blocks as the band's image reaches them, the target's densities only after the
+        // splat (then the domain's may be done with: a consuming warp() hands its memory over).
+        const std::uint64_t voxels = std::uint64_t(dims[0]) * std::uint64_t(dims[1]) * std::uint64_t(dims[2]);
+        require_memory(voxels * sizeof(float), 0, "warp target of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
         acc.reset(all);
-        result = Voxmap(dims, domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(all.lo[0]), double(all.lo[1]), double(all.lo[2])),
-                        domain.target_voxel_size);
+        result = Voxmap();
+        result.dims = dims;
+        result.origin = domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(all.lo[0]), double(all.lo[1]), double(all.lo[2]));
+        result.voxel_size = domain.target_voxel_size;
         if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
+        if (recycle && recycle->capacity() >= voxels) result.density = std::move(*recycle); // pages already faulted in
+        recycle = nullptr;
+        result.density.resize(std::size_t(voxels)); // uninitialised: resolve_rows writes every voxel
         resolve_rows(all);
     }
 };
 
 Warp::Warp(WarpDomain domain, const Lattice& lattice, const WarpOptions& options)
-    : Warp(std::make_shared<const WarpDomain>(std::move(domain)), lattice, options) {}
+    : Warp(std::make_shared<const WarpDomain>(std::move(domain)), lattice, options, nullptr) {}
 
-Warp::Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options)
+Warp::Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options, DensityArray* recycle)
     : state_(std::make_unique<State>(std::move(domain))) {
     auto& s = *state_;
+    s.recycle = recycle;
     if (lattice.size() != s.domain.lattice.size()) throw InvalidInput("warp: the lattice's size differs from the domain's");
     s.lattice = lattice;
     s.options = options;
@@ -655,7 +663,13 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
 
 Voxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options) {
     // Borrow the domain (no copy of its voxmap) for the lifetime of this call.
-    Warp w(std::shared_ptr<const WarpDomain>(&domain, [](const WarpDomain*) {}), lattice, options);
+    Warp w(std::shared_ptr<const WarpDomain>(&domain, [](const WarpDomain*) {}), lattice, options, nullptr);
+    return std::move(w.state_->result);
+}
+
+Voxmap warp(WarpDomain&& domain, const Lattice& lattice, const WarpOptions& options) {
+    Warp w(std::shared_ptr<const WarpDomain>(&domain, [](const WarpDomain*) {}), lattice, options, &domain.voxmap.density);
+    domain.voxmap.density = {};
     return std::move(w.state_->result);
 }
 
