@@ -253,8 +253,7 @@ public:
     }
 
     /// The target cells a splat writes: `count` cells from `first` per axis, with the overlap of each. A box at
-    /// most one voxel wide always gets two cells (the second possibly with zero overlap): branch-free, and
-    /// region_box and splat_region agree on the cells by construction.
+    /// most one voxel wide always gets two cells (the second possibly with zero overlap): branch-free.
     struct Footprint {
         std::int64_t first[3];
         int count[3];
@@ -285,19 +284,56 @@ public:
         }
     }
 
-    /// Target-index bounds of the cells the region's splats write.
-    Box region_box(const Lattice& lattice, int a, int b, int c, bool preview) const {
+    /// Conservative target-index bounds of the cells region (a, b, c)'s splats write, from its control points
+    /// alone (no voxel is mapped): the region's patch lies in the convex hull of its 64 Bezier points (the
+    /// B-spline segment converted per axis), and a splat reaches at most half its Jacobian box beyond its centre,
+    /// each Jacobian component being a convex combination of control-point differences over G. Exact for
+    /// affine maps up to the splat's extent.
+    Box region_bound(const Lattice& lattice, int a, int b, int c, bool preview) const {
+        Eigen::Vector3d P[4][4][4]; // [k][j][i], target index units
+        for (int k = 0; k < 4; ++k)
+            for (int j = 0; j < 4; ++j)
+                for (int i = 0; i < 4; ++i) P[k][j][i] = (lattice.point(a + i, b + j, c + k) - target_origin_) / h_;
+        Eigen::Vector3d reach = Eigen::Vector3d::Zero(); // half-extent bound of a splat box, per component
+        for (int axis = 0; axis < 3; ++axis) {
+            Eigen::Vector3d largest = Eigen::Vector3d::Zero();
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 3; ++i) {
+                        const Eigen::Vector3d d = axis == 0 ? P[k][j][i + 1] - P[k][j][i] : axis == 1 ? P[k][i + 1][j] - P[k][i][j] : P[i + 1][k][j] - P[i][k][j];
+                        largest = largest.cwiseMax(d.cwiseAbs());
+                    }
+            reach += 0.5 * largest / domain_.granularity[std::size_t(axis)];
+        }
+        // B-spline segment -> Bezier points, one axis at a time.
+        auto to_bezier = [](Eigen::Vector3d* p, int stride) {
+            const Eigen::Vector3d p0 = p[0], p1 = p[stride], p2 = p[2 * stride], p3 = p[3 * stride];
+            p[0] = (p0 + 4 * p1 + p2) / 6;
+            p[stride] = (2 * p1 + p2) / 3;
+            p[2 * stride] = (p1 + 2 * p2) / 3;
+            p[3 * stride] = (p1 + 4 * p2 + p3) / 6;
+        };
+        Eigen::Vector3d* flat = &P[0][0][0];
+        for (int q = 0; q < 16; ++q) to_bezier(flat + 4 * q, 1);                      // along i
+        for (int k = 0; k < 4; ++k)
+            for (int i = 0; i < 4; ++i) to_bezier(flat + 16 * k + i, 4);              // along j
+        for (int q = 0; q < 16; ++q) to_bezier(flat + q, 16);                          // along k
+        Eigen::Vector3d lo = flat[0], hi = flat[0];
+        for (int q = 1; q < 64; ++q) lo = lo.cwiseMin(flat[q]), hi = hi.cwiseMax(flat[q]);
+        if (!preview) lo -= reach, hi += reach;
         Box box;
-        Footprint fp;
-        for_each_box(lattice, a, b, c, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float, double) {
-            footprint(centre, lo, hi, preview, fp);
-            box.include({fp.first[0], fp.first[1], fp.first[2]}, {fp.first[0] + fp.count[0] - 1, fp.first[1] + fp.count[1] - 1, fp.first[2] + fp.count[2] - 1});
-        });
+        Index3 l, u;
+        for (std::size_t i = 0; i < 3; ++i) {
+            // floor(x + 0.5) is the cell of x; one more each side for rounding, and the splat's second cell.
+            l[i] = floor_index(lo[int(i)] + 0.5) - 1;
+            u[i] = floor_index(hi[int(i)] + 0.5) + 2;
+        }
+        box.include(l, u);
         return box;
     }
 
     /// Add (sign = +1) or remove (sign = -1) a mapped region's contributions; returns the bounds of the cells
-    /// written (region_box's). A cell outside the accumulator's box is not written and sets `overflow`.
+    /// written. A cell outside the accumulator's box is not written and sets `overflow`.
     Box splat_region(const Lattice& lattice, int a, int b, int c, bool preview, int sign, BlockAccumulator& acc, bool& overflow) const {
         const Index3 origin = acc.box.lo, extent{acc.box.hi[0] - acc.box.lo[0], acc.box.hi[1] - acc.box.lo[1], acc.box.hi[2] - acc.box.lo[2]};
         Box box;
@@ -486,6 +522,7 @@ struct Warp::State {
     std::unique_ptr<Splatter> splatter;
     std::vector<Box> boxes; // per region, what its current splat touches
     BlockAccumulator acc;
+    Box target; // the result's bounds, target index space
     Voxmap result;
     DensityArray* recycle = nullptr; // the consumed domain's densities, reusable for the first full() result
 
@@ -500,14 +537,12 @@ struct Warp::State {
         return {int(r % std::size_t(n[0])), int((r / std::size_t(n[0])) % std::size_t(n[1])), int(r / (std::size_t(n[0]) * std::size_t(n[1])))};
     }
 
-    /// Recompute the boxes of `regions` for the current lattice.
-    void compute_boxes(const std::vector<std::size_t>& regions) {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, regions.size(), 1), [&](const auto& range) {
-            for (std::size_t q = range.begin(); q != range.end(); ++q) {
-                const auto [a, b, c] = unpack(regions[q]);
-                boxes[regions[q]] = splatter->region_box(lattice, a, b, c, options.preview);
-            }
-        });
+    /// Conservative boxes of `regions` for the current lattice (region_bound).
+    void bound_boxes(const std::vector<std::size_t>& regions) {
+        for (auto r : regions) {
+            const auto [a, b, c] = unpack(r);
+            boxes[r] = splatter->region_bound(lattice, a, b, c, options.preview);
+        }
     }
 
     /// Splat `regions` with `sign`, in eight parity phases: regions two apart along every axis write disjoint
@@ -553,21 +588,25 @@ struct Warp::State {
     /// Resolve the target rows (whole x rows: an untouched voxel's side is carried along its row) that cross
     /// `box` (target index space) into the result voxmap.
     void resolve_rows(const Box& box) {
-        const Index3 dims{result.dims[0], result.dims[1], result.dims[2]};
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(box.lo[2] - acc.box.lo[2], box.hi[2] - acc.box.lo[2] + 1), [&](const auto& range) {
+        const std::int64_t z0 = std::max(box.lo[2], target.lo[2]), z1 = std::min(box.hi[2], target.hi[2]);
+        const std::int64_t y0 = std::max(box.lo[1], target.lo[1]), y1 = std::min(box.hi[1], target.hi[1]);
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(z0, z1 + 1), [&](const auto& range) {
             for (std::int64_t z = range.begin(); z != range.end(); ++z)
-                for (std::int64_t y = box.lo[1] - acc.box.lo[1]; y <= box.hi[1] - acc.box.lo[1]; ++y) {
-                    float* out = &result.density[std::size_t(result.index(0, y, z))];
+                for (std::int64_t y = y0; y <= y1; ++y) {
+                    float* out = &result.density[std::size_t(result.index(0, y - target.lo[1], z - target.lo[2]))] - target.lo[0];
+                    const std::int64_t ay = y - acc.box.lo[1], az = z - acc.box.lo[2];
                     bool inside = false;
-                    for (std::int64_t bx = 0; bx < acc.blocks[0]; ++bx) {
-                        const std::int64_t x0 = bx * BlockAccumulator::kSide, x1 = std::min(dims[0], x0 + BlockAccumulator::kSide);
-                        const Cell* block = acc.find(bx, y >> 3, z >> 3);
+                    for (std::int64_t x = target.lo[0]; x <= target.hi[0];) { // one accumulator block at a time
+                        const std::int64_t ax = x - acc.box.lo[0];
+                        const std::int64_t end = std::min(target.hi[0], x + (BlockAccumulator::kSide - 1 - (ax & 7)));
+                        const Cell* block = acc.find(ax >> 3, ay >> 3, az >> 3);
                         if (!block) {
-                            std::fill(out + x0, out + x1, inside ? 1.0f : 0.0f);
-                            continue;
+                            std::fill(out + x, out + end + 1, inside ? 1.0f : 0.0f);
+                        } else {
+                            const Cell* cell = block + BlockAccumulator::offset(ax, ay, az);
+                            for (std::int64_t q = x; q <= end; ++q, ++cell) out[q] = resolve_density(cell->weight, cell->value, std::int32_t(kFixedOne), inside);
                         }
-                        const Cell* row = block + BlockAccumulator::offset(0, y, z);
-                        for (std::int64_t x = x0; x < x1; ++x) out[x] = resolve_density(row[x - x0].weight, row[x - x0].value, std::int32_t(kFixedOne), inside);
+                        x = end + 1;
                     }
                 }
         });
@@ -575,30 +614,33 @@ struct Warp::State {
 
     void full(Progress* progress) {
         const auto regions = active_regions();
-        compute_boxes(regions);
-        Box all;
-        for (auto r : regions) all.include(boxes[r]);
-        if (all.empty()) { // no density at all: a one-voxel empty target at the domain's origin
-            all.lo = all.hi = Index3{0, 0, 0};
-        }
-        // A margin of two voxels lets small incremental moves stay inside without regrowing.
-        for (std::size_t i = 0; i < 3; ++i) all.lo[i] -= 2, all.hi[i] += 2;
+        // The accumulator spans the regions' conservative bounds (its block table is all it costs), the target
+        // the splats' exact reach, known after the splat, with a margin of two voxels that lets small
+        // incremental moves stay inside without regrowing.
+        bound_boxes(regions);
+        Box bound;
+        for (auto r : regions) bound.include(boxes[r]);
+        if (bound.empty()) bound.lo = bound.hi = Index3{0, 0, 0}; // no density at all
+        for (std::size_t i = 0; i < 3; ++i) bound.lo[i] -= 2, bound.hi[i] += 2;
+        acc.reset(bound);
+        if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
+        target = Box();
+        for (auto r : regions) target.include(boxes[r]);
+        if (target.empty()) target.lo = target.hi = Index3{0, 0, 0}; // a one-voxel empty target at the domain's origin
+        for (std::size_t i = 0; i < 3; ++i) target.lo[i] -= 2, target.hi[i] += 2;
         Index3 dims;
-        for (std::size_t i = 0; i < 3; ++i) dims[i] = all.hi[i] - all.lo[i] + 1;
-        // The block table now, the blocks as the band's image reaches them, the target's densities only after the
-        // splat (then the domain's may be done with: a consuming warp() hands its memory over).
+        for (std::size_t i = 0; i < 3; ++i) dims[i] = target.hi[i] - target.lo[i] + 1;
         const std::uint64_t voxels = std::uint64_t(dims[0]) * std::uint64_t(dims[1]) * std::uint64_t(dims[2]);
         require_memory(voxels * sizeof(float), 0, "warp target of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
-        acc.reset(all);
         result = Voxmap();
         result.dims = dims;
-        result.origin = domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(all.lo[0]), double(all.lo[1]), double(all.lo[2]));
+        result.origin = domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(target.lo[0]), double(target.lo[1]), double(target.lo[2]));
         result.voxel_size = domain.target_voxel_size;
-        if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
-        if (recycle && recycle->capacity() >= voxels) result.density = std::move(*recycle); // pages already faulted in
+        // The domain's densities are done with: a consuming warp() hands their (already faulted-in) memory over.
+        if (recycle && recycle->capacity() >= voxels) result.density = std::move(*recycle);
         recycle = nullptr;
         result.density.resize(std::size_t(voxels)); // uninitialised: resolve_rows writes every voxel
-        resolve_rows(all);
+        resolve_rows(target);
     }
 };
 
@@ -653,11 +695,14 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
     for (auto idx : affected)
         for (std::size_t a = 0; a < 3; ++a) s.boxes[idx].lo[a] -= grow, s.boxes[idx].hi[a] += grow;
     s.lattice.set_point(i, j, k, position);
-    if (!s.splat(affected, +1, nullptr)) { // the moved regions reach outside the target: grow it
+    Box after;
+    const bool inside_accumulator = s.splat(affected, +1, nullptr);
+    for (auto idx : affected) after.include(s.boxes[idx]);
+    if (!inside_accumulator || !s.target.contains(after)) { // the moved regions reach outside the target: grow it
         s.full(nullptr);
         return;
     }
-    for (auto idx : affected) touched.include(s.boxes[idx]);
+    touched.include(after);
     if (!touched.empty()) s.resolve_rows(touched);
 }
 
