@@ -113,23 +113,33 @@ TEST(RoundTrip, BunnyMatchesOpenVDBAccuracy) {
     EXPECT_LE(ours.p99 / h, 0.2);
 }
 
-// The snowden bust is a hollow shell whose walls are 0.059 units thick (0.94 voxel at 128 voxels, 1.9 at 256):
-// a sub-voxel wall cannot be held by a density sampled at voxel centres, so the solid is checked at 256.
-TEST(RoundTrip, SnowdenScanBecomesClosedSolidWithoutTunnels) {
+// The snowden bust is a hollow shell whose walls are 0.059 units thick: 0.94 voxel at 128 voxels. Such a wall
+// often holds no voxel centre; voxelize keeps it (keep_thin_walls) and drops crumbs (drop_specks), so the scan
+// must come out as one closed solid, its Euler characteristic that of the shell and its openings (measured -4
+// at 128 and -2 at 256), not hundreds of tunnels.
+TEST(RoundTrip, SnowdenScanBecomesOneClosedSolidWithoutTunnels) {
     const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
     ASSERT_FALSE(topology(scan).watertight()); // the point of the test: an open, non-manifold scan
-    const Voxmap voxmap = voxelize(scan, {.resolution = 256});
-    const double h = voxmap.voxel_size;
-    const TriangleMesh out = extract(voxmap);
-    expect_closed_manifold(out);
-    const MeshTopology t = topology(out);
-    std::printf("snowden@256: euler %lld, components %lld\n", (long long)t.euler, (long long)t.components);
-    // OpenVDB's flood-fill sign gives this scan hundreds of spurious tunnels (euler about -600).
-    EXPECT_GE(t.euler, -4);
-    const DistanceStats d = one_sided_distance(scan, out);
-    std::printf("snowden@256 input->output distance: mean %.4f p99 %.4f max %.4f (voxels)\n", d.mean / h, d.p99 / h, d.max / h);
-    EXPECT_LE(d.mean / h, 0.1);
-    EXPECT_LE(d.p99 / h, 1.0);
+    for (const int resolution : {128, 256}) {
+        const Voxmap voxmap = voxelize(scan, {.resolution = resolution});
+        const double h = voxmap.voxel_size;
+        const TriangleMesh out = extract(voxmap);
+        expect_closed_manifold(out);
+        const MeshTopology t = topology(out);
+        std::printf("snowden@%d: euler %lld, components %lld\n", resolution, (long long)t.euler, (long long)t.components);
+        // OpenVDB's flood-fill sign gives this scan hundreds of spurious tunnels (euler about -600).
+        EXPECT_EQ(t.components, 1) << resolution;
+        EXPECT_GE(t.euler, -4) << resolution;
+        EXPECT_LE(t.euler, 4) << resolution;
+        const DistanceStats d = one_sided_distance(scan, out);
+        std::printf("snowden@%d input->output distance: mean %.4f p99 %.4f max %.4f (voxels)\n", resolution, d.mean / h, d.p99 / h, d.max / h);
+        // Where a wall thinner than a voxel holds no voxel centre, both its faces fall between the same two
+        // samples and one face cannot be placed (an edge holds one crossing): at 128 the mean stays near 0.16
+        // voxel, at 256 (1.9-voxel walls) near 0.05. The sheet in front of the eyes (0.5 % of the area, open,
+        // enclosing nothing) vanishes, which is most of the p99.
+        EXPECT_LE(d.mean / h, resolution == 128 ? 0.2 : 0.06) << resolution;
+        EXPECT_LE(d.p99 / h, 1.0) << resolution;
+    }
 }
 
 TEST(Decimate, ReachesTheTargetAndKeepsTheSphere) {

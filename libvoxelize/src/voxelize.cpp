@@ -10,6 +10,7 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
+#include <numeric>
 #include <cstdio>
 #include <limits>
 #include <string>
@@ -48,19 +49,35 @@ void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
                            std::to_string(int(std::ceil(options.ramp_voxels)) + 1));
 }
 
-/// Bounds of the faces that have area: zero-area stray triangles (common in scans) enclose nothing and
+/// Bounds of the faces that have area, leaving out stray pieces: zero-area or tiny stray triangles (common in scans) enclose nothing and
 /// would otherwise stretch the grid, and with it the voxel size a --resolution gives.
 Bounds solid_bounds(const TriangleMesh& mesh) {
     TriangleMesh storage;
     const auto& faces = all_triangles(mesh, storage);
-    TriangleMesh with_area;
-    with_area.vertices = mesh.vertices;
-    for (const auto& f : faces)
-        if ((mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]).squaredNorm() > 0) with_area.triangles.push_back(f);
-    if (with_area.triangles.empty()) return bounds(mesh);
+    // Connected pieces (faces sharing vertices) and their areas; a piece with under 1e-4 of the total area is a
+    // stray (a scanner's speck far from the model) and must not stretch the grid.
+    std::vector<std::size_t> parent(mesh.vertices.size());
+    std::iota(parent.begin(), parent.end(), std::size_t(0));
+    auto root = [&](std::size_t v) {
+        while (parent[v] != v) v = parent[v] = parent[parent[v]];
+        return v;
+    };
+    std::vector<double> area(faces.size());
+    double total = 0;
+    for (std::size_t f = 0; f < faces.size(); ++f) {
+        const auto& t = faces[f];
+        area[f] = 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
+        total += area[f];
+        parent[root(std::size_t(t[0]))] = root(std::size_t(t[1]));
+        parent[root(std::size_t(t[1]))] = root(std::size_t(t[2]));
+    }
+    if (!(total > 0)) return bounds(mesh);
+    std::vector<double> piece_area(mesh.vertices.size(), 0.0);
+    for (std::size_t f = 0; f < faces.size(); ++f) piece_area[root(std::size_t(faces[f][0]))] += area[f];
     Bounds b{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
-    for (const auto& f : with_area.triangles)
-        for (auto v : f) b.min = b.min.cwiseMin(mesh.vertices[v]), b.max = b.max.cwiseMax(mesh.vertices[v]);
+    for (std::size_t f = 0; f < faces.size(); ++f)
+        if (area[f] > 0 && piece_area[root(std::size_t(faces[f][0]))] >= 1e-4 * total)
+            for (auto v : faces[f]) b.min = b.min.cwiseMin(mesh.vertices[v]), b.max = b.max.cwiseMax(mesh.vertices[v]);
     return b;
 }
 
@@ -154,16 +171,18 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
     progress.report(1.0);
 }
 
-/// Keep walls thinner than a voxel. Where such a wall passes between two neighbouring voxel centres
-/// without containing either, both read as outside and the wall would vanish there, leaving a tunnel. For
-/// every such edge (both ends outside and within a voxel of the surface, midpoint inside) both ends are
-/// made inside, with the signed distance that puts their outward crossing, interpolated to the next voxel
-/// out, exactly at the wall's face: phi = -u (1 + u) / (1 - u) voxels, u = the end's distance to the face.
-/// The wall then comes out about a voxel thick, its outer faces in place. Returns the voxels changed.
+/// Keep walls thinner than a voxel. Where such a wall passes between two neighbouring voxel centres (along an
+/// edge, a face diagonal or a body diagonal of the grid) without containing either, both read as outside and
+/// the wall would vanish there, leaving a tunnel. For every such pair (both ends outside and close enough to the
+/// surface for the wall to fit between them, midpoint inside) the end nearer the wall is made inside, with the signed
+/// distance that puts their outward crossing, interpolated to the next voxel out, at the wall's face:
+/// phi = -u (1 + u) / (1 - u) voxels, u = the end's distance to the face. Checking all 26 neighbours, not just
+/// the 6 along the axes, is what closes oblique walls: afterwards no two outside voxels on opposite sides of a
+/// wall at least ~0.87 voxel thick are neighbours in any direction, so the extracted surface cannot open
+/// between them. The wall comes out about a voxel thick, its outer faces in place. Returns the voxels changed.
 std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, double orientation, Progress& progress) {
     const double h = phi.voxel_size;
     const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
-    const std::array<std::int64_t, 3> stride{1, nx, nx * ny};
     std::vector<float> replacement(phi.density.size(), 0.0f);
     auto inside_value = [h](float value) {
         const double u = std::min(0.9, double(value) / h);
@@ -175,28 +194,84 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, double o
         for (std::int64_t k = r.begin(); k != r.end(); ++k)
             for (std::int64_t j = 0; j < ny; ++j)
                 for (std::int64_t i = 0; i < nx; ++i) {
-                    const std::int64_t a = phi.index(i, j, k);
-                    const float pa = phi.density[std::size_t(a)];
-                    if (!(pa > 0 && pa < h)) continue;
-                    const std::array<bool, 3> has_next{i + 1 < nx, j + 1 < ny, k + 1 < nz};
-                    for (int axis = 0; axis < 3; ++axis) {
-                        if (!has_next[std::size_t(axis)]) continue;
-                        const std::int64_t b = a + stride[std::size_t(axis)];
-                        const float pb = phi.density[std::size_t(b)];
-                        if (!(pb > 0 && pb < h && pa + pb < h)) continue;
-                        Eigen::Vector3d mid = phi.world(double(i), double(j), double(k));
-                        mid[axis] += 0.5 * h;
-                        if (orientation * winding(mid) < 0.5) continue;
-                        // Two slabs may claim one voxel; both write the same kind of value (its own), so the race is benign.
-                        replacement[std::size_t(a)] = inside_value(pa);
-                        replacement[std::size_t(b)] = inside_value(pb);
-                    }
+                    const float pa = phi.density[std::size_t(phi.index(i, j, k))];
+                    if (!(pa > 0 && pa < 1.75 * h)) continue;
+                    bool marked = false;
+                    for (int dz = -1; dz <= 1 && !marked; ++dz)
+                        for (int dy = -1; dy <= 1 && !marked; ++dy)
+                            for (int dx = -1; dx <= 1 && !marked; ++dx) {
+                                const std::int64_t x = i + dx, y = j + dy, z = k + dz;
+                                if ((dx | dy | dz) == 0 || x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) continue;
+                                const float pb = phi.density[std::size_t(phi.index(x, y, z))];
+                                const double length = h * std::sqrt(double(dx * dx + dy * dy + dz * dz));
+                                if (!(pb > 0 && pa + pb < length)) continue;
+                                // One end per pair suffices to block it: the one nearer the wall (ties: the lower index).
+                                if (pb < pa || (pb == pa && phi.index(x, y, z) < phi.index(i, j, k))) continue;
+                                const Eigen::Vector3d mid = phi.world(double(i) + 0.5 * dx, double(j) + 0.5 * dy, double(k) + 0.5 * dz);
+                                marked = orientation * winding(mid) >= 0.5;
+                            }
+                    if (marked) replacement[std::size_t(phi.index(i, j, k))] = inside_value(pa);
                 }
     });
     progress.check();
     std::int64_t changed = 0;
     for (std::size_t v = 0; v < replacement.size(); ++v)
         if (replacement[v] < 0) phi.density[v] = replacement[v], ++changed;
+    return changed;
+}
+
+/// Drop specks and bubbles: islands of inside voxels, or pockets of outside voxels, no more than three voxels
+/// across, with nothing of the same side within two voxels. A scan's self-overlaps and folds (and thin walls
+/// made to hold) leave such crumbs; a closed part or cavity that small cannot be resolved at this voxel size
+/// anyway (it would come out as a few triangles). A 26-connected fill over the voxel's side, from each voxel
+/// near the surface, within the 5^3 window around it, that never reaches the window's border finds one; the
+/// voxel then takes the other side. Returns the voxels changed.
+std::int64_t drop_specks(Voxmap& phi, Progress& progress) {
+    const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
+    const float h = float(phi.voxel_size);
+    std::vector<std::uint8_t> speck(phi.density.size(), 0);
+    auto side = [&](std::int64_t i, std::int64_t j, std::int64_t k) { // outside the grid is outside
+        return i >= 0 && j >= 0 && k >= 0 && i < nx && j < ny && k < nz && phi.density[std::size_t(phi.index(i, j, k))] < 0;
+    };
+    progress.stage("specks");
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
+        std::array<std::uint8_t, 125> seen{};
+        std::array<int, 125> stack{};
+        for (std::int64_t k = r.begin(); k != r.end(); ++k)
+            for (std::int64_t j = 0; j < ny; ++j)
+                for (std::int64_t i = 0; i < nx; ++i) {
+                    const float value = phi.density[std::size_t(phi.index(i, j, k))];
+                    if (std::abs(value) > 2 * h) continue; // far from the surface: no crumb
+                    const bool own = value < 0;
+                    seen.fill(0);
+                    int top = 0;
+                    stack[std::size_t(top++)] = 62; // the window's centre, (2, 2, 2)
+                    seen[62] = 1;
+                    bool escapes = false;
+                    while (top > 0 && !escapes) {
+                        const int c = stack[std::size_t(--top)];
+                        const int x = c % 5, y = (c / 5) % 5, z = c / 25;
+                        if (x == 0 || y == 0 || z == 0 || x == 4 || y == 4 || z == 4) {
+                            escapes = true;
+                            break;
+                        }
+                        for (int dz = -1; dz <= 1; ++dz)
+                            for (int dy = -1; dy <= 1; ++dy)
+                                for (int dx = -1; dx <= 1; ++dx) {
+                                    if (!own && std::abs(dx) + std::abs(dy) + std::abs(dz) != 1) continue; // outside: face neighbours only
+                                    const int n = (x + dx) + 5 * ((y + dy) + 5 * (z + dz));
+                                    if (seen[std::size_t(n)] || side(i + x + dx - 2, j + y + dy - 2, k + z + dz - 2) != own) continue;
+                                    seen[std::size_t(n)] = 1;
+                                    stack[std::size_t(top++)] = n;
+                                }
+                    }
+                    if (!escapes) speck[std::size_t(phi.index(i, j, k))] = 1;
+                }
+    });
+    progress.check();
+    std::int64_t changed = 0;
+    for (std::size_t v = 0; v < speck.size(); ++v)
+        if (speck[v]) phi.density[v] = phi.density[v] < 0 ? 0.5f * h : -0.5f * h, ++changed;
     return changed;
 }
 
@@ -313,6 +388,7 @@ Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options) {
         grid_to_dense(*band, voxmap, [](float phi) { return phi; });
         sign_off_band(voxmap, band->background(), winding, orientation, progress);
         keep_thin_walls(voxmap, winding, orientation, progress);
+        drop_specks(voxmap, progress);
         progress.stage("density");
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = ramp(voxmap.density[i]);
