@@ -92,7 +92,6 @@ public:
         table_ = std::vector<std::atomic<Cell*>>(std::size_t(blocks[0] * blocks[1] * blocks[2]));
         chunks_.clear();
         arenas_.clear();
-        allocated_ = 0;
     }
 
     /// The block holding target-relative cell (x, y, z) (relative to box.lo), allocated zeroed if absent.
@@ -108,12 +107,11 @@ public:
         arena.spare = fresh;
         return p;
     }
-    /// The block holding relative cell (x, y, z), or null.
+    /// Block (bx, by, bz) (block coordinates, relative to box.lo), or null where no splat reached.
     const Cell* find(std::int64_t bx, std::int64_t by, std::int64_t bz) const {
         return table_[std::size_t(bx + blocks[0] * (by + blocks[1] * bz))].load(std::memory_order_acquire);
     }
     static std::int64_t offset(std::int64_t x, std::int64_t y, std::int64_t z) { return (x & 7) + kSide * ((y & 7) + kSide * (z & 7)); }
-    std::uint64_t bytes() const { return allocated_ * kCells * sizeof(Cell) + table_.size() * sizeof(Cell*); }
 
 private:
     static constexpr std::size_t kChunkBlocks = 512; // 2 MiB: one huge page
@@ -134,7 +132,6 @@ private:
         }
         Cell* p = arena.next;
         arena.next += kCells;
-        allocated_.fetch_add(1, std::memory_order_relaxed);
         std::fill(p, p + kCells, Cell{0, 0});
         return p;
     }
@@ -143,7 +140,6 @@ private:
     std::vector<std::unique_ptr<Cell[], ReleaseCells>> chunks_;
     std::mutex mutex_;
     tbb::enumerable_thread_specific<Arena> arenas_;
-    std::atomic<std::uint64_t> allocated_{0};
 };
 
 /// The splat of one domain voxel. The paper takes the bounding box of the six mapped face centres; under a
@@ -550,9 +546,11 @@ struct Warp::State {
 
     /// Splat `regions` with `sign`, in eight parity phases: regions two apart along every axis write disjoint
     /// target voxels unless the map compresses a region to nothing, which is checked against `boxes` (then the
-    /// phase runs serially). `boxes` may be conservative; each region's exact box replaces it. Returns false,
-    /// with the accumulator spoilt, when a splat reached outside the accumulator's box.
-    bool splat(const std::vector<std::size_t>& regions, int sign, Progress* progress) {
+    /// phase runs serially). `boxes` may be conservative; each region's exact box replaces it. With `previous`,
+    /// each region's splat through that lattice is first taken out (an incremental move: region by region, so
+    /// the cells both touch are still in cache for the second). Returns false, with the accumulator spoilt,
+    /// when a splat reached outside the accumulator's box.
+    bool splat(const std::vector<std::size_t>& regions, int sign, Progress* progress, const Lattice* previous = nullptr) {
         std::size_t done = 0;
         std::atomic<bool> overflow{false};
         for (int phase = 0; phase < 8; ++phase) {
@@ -572,6 +570,7 @@ struct Warp::State {
             auto work = [&](std::size_t q) {
                 const auto [a, b, c] = unpack(batch[q]);
                 bool out = false;
+                if (previous) splatter->splat_region(*previous, a, b, c, options.preview, -sign, acc, out);
                 exact[q] = splatter->splat_region(lattice, a, b, c, options.preview, sign, acc, out);
                 if (out) overflow = true;
             };
@@ -689,17 +688,18 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
             }
     Box touched;
     for (auto idx : affected) touched.include(s.boxes[idx]);
-    s.splat(affected, -1, nullptr);
     // No separate pass to bound the new splats: a point moved by d shifts its regions' images by at most
     // (2/3)^3 d (the basis' largest tensor value) and their Jacobians by less, so the old boxes grown by d + 2
-    // voxels bound the new ones for the parity phases' disjointness check; the splat records the exact boxes.
+    // voxels bound the old and the new splats for the parity phases' disjointness check; the splat records
+    // the exact new boxes.
+    const Lattice before = s.lattice;
     const double reach = (position - s.lattice.point(i, j, k)).norm() / s.domain.target_voxel_size + 2;
     const std::int64_t grow = reach < 1e9 ? std::int64_t(std::ceil(reach)) : std::int64_t(1e9);
     for (auto idx : affected)
         for (std::size_t a = 0; a < 3; ++a) s.boxes[idx].lo[a] -= grow, s.boxes[idx].hi[a] += grow;
     s.lattice.set_point(i, j, k, position);
     Box after;
-    const bool inside_accumulator = s.splat(affected, +1, nullptr);
+    const bool inside_accumulator = s.splat(affected, +1, nullptr, &before);
     for (auto idx : affected) after.include(s.boxes[idx]);
     if (!inside_accumulator || !s.target.contains(after)) { // the moved regions reach outside the target: grow it
         s.full(nullptr);
