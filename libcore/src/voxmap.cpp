@@ -64,10 +64,18 @@ float Voxmap::sample(const Eigen::Vector3d& p) const {
 }
 
 double enclosed_volume(const Voxmap& voxmap) {
-    const double sum = tbb::parallel_reduce(
+    // Eight independent partial sums: one running sum is a chain of dependent additions, which at 512^3 took a
+    // tenth of a second. Deterministic splitting keeps the figure identical from run to run.
+    const double sum = tbb::parallel_deterministic_reduce(
         tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), 0.0,
         [&](const tbb::blocked_range<std::size_t>& r, double acc) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) acc += voxmap.density[i];
+            double partial[8] = {};
+            const float* d = voxmap.density.data();
+            std::size_t i = r.begin();
+            for (; i + 8 <= r.end(); i += 8)
+                for (int k = 0; k < 8; ++k) partial[k] += double(d[i + std::size_t(k)]);
+            for (; i != r.end(); ++i) partial[0] += double(d[i]);
+            for (double p : partial) acc += p;
             return acc;
         },
         [](double a, double b) { return a + b; });
