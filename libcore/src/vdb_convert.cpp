@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include <atomic>
+#include <bit>
 #include <cmath>
 
 namespace voxwarp::vdb_internal {
@@ -38,13 +39,24 @@ openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap) {
             };
             const float first = value(i0, j0, k0);
             bool uniform = true;
-            for (std::int64_t k = k0; k < k0 + B && uniform; ++k)
-                for (std::int64_t j = j0; j < j0 + B && uniform; ++j)
-                    for (std::int64_t i = i0; i < i0 + B; ++i)
-                        if (value(i, j, k) != first) {
-                            uniform = false;
-                            break;
-                        }
+            if (i0 + B <= nx && j0 + B <= ny && k0 + B <= nz) { // inside the voxmap: whole rows, bit patterns
+                const std::uint32_t pattern = std::bit_cast<std::uint32_t>(first);
+                for (std::int64_t k = k0; k < k0 + B && uniform; ++k)
+                    for (std::int64_t j = j0; j < j0 + B && uniform; ++j) {
+                        const float* row = &voxmap.density[std::size_t(voxmap.index(i0, j, k))];
+                        std::uint32_t differs = 0;
+                        for (std::int64_t i = 0; i < B; ++i) differs |= std::bit_cast<std::uint32_t>(row[i]) ^ pattern;
+                        uniform = differs == 0;
+                    }
+            } else {
+                for (std::int64_t k = k0; k < k0 + B && uniform; ++k)
+                    for (std::int64_t j = j0; j < j0 + B && uniform; ++j)
+                        for (std::int64_t i = i0; i < i0 + B; ++i)
+                            if (value(i, j, k) != first) {
+                                uniform = false;
+                                break;
+                            }
+            }
             if (uniform) {
                 tile[b] = first;
                 continue;
