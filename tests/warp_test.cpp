@@ -134,25 +134,28 @@ TEST(Warp, RotatedBoxMatchesTheRotatedBox) {
     EXPECT_EQ(topology(out).boundary_edges, 0);
 }
 
+/// `rest` with every control point moved by a normal random offset of deviation `sigma` (world units).
+Lattice jiggled(const Lattice& rest, unsigned seed, double sigma) {
+    Lattice moved = rest;
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> n(0, sigma);
+    for (auto& p : moved.points()) p += Eigen::Vector3d(n(rng), n(rng), n(rng));
+    return moved;
+}
+
 TEST(Warp, FastPathMatchesTheNaiveReference) {
     const Voxmap input = sphere_voxmap(20);
     const WarpDomain domain = make_domain(input, {.size = {7, 7, 7}});
-    Lattice moved = domain.lattice;
-    std::mt19937 rng(11);
-    std::normal_distribution<double> n(0, 0.8 * input.voxel_size);
-    for (auto& p : moved.points()) p += Eigen::Vector3d(n(rng), n(rng), n(rng));
+    const Lattice moved = jiggled(domain.lattice, 11, 0.8 * input.voxel_size);
     EXPECT_LE(max_difference(warp(domain, moved), warp_reference(domain, moved)), 1e-6);
 }
 
 TEST(Warp, NarrowBandMatchesTheNaiveReferenceOnALargeInterior) {
-    // A sphere 40 voxels across: most of it lies more than 3 voxels from the surface, where the fast path
-    // splats nothing and fills by side; the reference splats every voxel.
+    // A sphere 40 voxels across: most of it lies beyond the band (2 voxels past the fractional densities),
+    // where the fast path splats nothing and fills by side; the reference splats every voxel.
     const Voxmap input = sphere_voxmap(40);
     const WarpDomain domain = make_domain(input, {.size = {6, 6, 6}});
-    Lattice moved = domain.lattice;
-    std::mt19937 rng(3);
-    std::normal_distribution<double> n(0, 1.5 * input.voxel_size);
-    for (auto& p : moved.points()) p += Eigen::Vector3d(n(rng), n(rng), n(rng));
+    const Lattice moved = jiggled(domain.lattice, 3, 1.5 * input.voxel_size);
     const Voxmap fast = warp(domain, moved);
     EXPECT_LE(max_difference(fast, warp_reference(domain, moved)), 1e-6);
     std::size_t full = 0;
