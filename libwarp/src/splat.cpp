@@ -446,7 +446,7 @@ private:
                     mixed_slab(k - kReach, ring[std::size_t((k + 2 * kReach + 1) % (2 * kReach + 1))], line, here);
                 auto& runs = chunk_runs[std::size_t(c)];
                 for (std::int64_t k = k0; k < k1; ++k) {
-                    mixed_slab(k + kReach - kReach, ring[std::size_t((k + kReach) % (2 * kReach + 1))], line, here);
+                    mixed_slab(k, ring[std::size_t((k + kReach) % (2 * kReach + 1))], line, here); // near slab k + kReach
                     std::fill(band.begin(), band.end(), std::uint8_t(0));
                     for (const auto& slab : ring) or_into(band.data(), slab.data(), std::int64_t(slab_bytes));
                     for (std::int64_t j = 0; j < ny; ++j) {
