@@ -10,9 +10,9 @@
 #include <tbb/parallel_for.h>
 
 #include <cmath>
-#include <numeric>
 #include <cstdio>
 #include <limits>
+#include <numeric>
 #include <string>
 
 namespace voxwarp {
@@ -49,8 +49,8 @@ void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
                            std::to_string(int(std::ceil(options.ramp_voxels)) + 1));
 }
 
-/// Bounds of the faces that have area, leaving out stray pieces: zero-area or tiny stray triangles (common in scans) enclose nothing and
-/// would otherwise stretch the grid, and with it the voxel size a --resolution gives.
+/// Bounds of the faces that have area, leaving out stray pieces: zero-area faces and tiny stray specks (common
+/// in scans) enclose nothing and would otherwise stretch the grid, and with it the voxel size a --resolution gives.
 Bounds solid_bounds(const TriangleMesh& mesh) {
     TriangleMesh storage;
     const auto& faces = all_triangles(mesh, storage);
@@ -174,8 +174,8 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
 /// Keep walls thinner than a voxel. Where such a wall passes between two neighbouring voxel centres (along an
 /// edge, a face diagonal or a body diagonal of the grid) without containing either, both read as outside and
 /// the wall would vanish there, leaving a tunnel. For every such pair (both ends outside and close enough to the
-/// surface for the wall to fit between them, midpoint inside) the end nearer the wall is made inside, with the signed
-/// distance that puts their outward crossing, interpolated to the next voxel out, at the wall's face:
+/// surface for the wall to fit between them, midpoint inside) the end nearer the wall is made inside, with the
+/// signed distance that puts its outward crossing, interpolated to the next voxel out, at the wall's face:
 /// phi = -u (1 + u) / (1 - u) voxels, u = the end's distance to the face. Checking all 26 neighbours, not just
 /// the 6 along the axes, is what closes oblique walls: afterwards no two outside voxels on opposite sides of a
 /// wall at least ~0.87 voxel thick are neighbours in any direction, so the extracted surface cannot open
@@ -223,9 +223,10 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, double o
 /// Drop specks and bubbles: islands of inside voxels, or pockets of outside voxels, no more than three voxels
 /// across, with nothing of the same side within two voxels. A scan's self-overlaps and folds (and thin walls
 /// made to hold) leave such crumbs; a closed part or cavity that small cannot be resolved at this voxel size
-/// anyway (it would come out as a few triangles). A 26-connected fill over the voxel's side, from each voxel
-/// near the surface, within the 5^3 window around it, that never reaches the window's border finds one; the
-/// voxel then takes the other side. Returns the voxels changed.
+/// anyway (it would come out as a few triangles). A fill over the voxel's side (26-connected inside, 6-connected
+/// outside: the pockets VolumeToMesh meshes as separate bubbles), from each voxel near the surface, within the
+/// 5^3 window around it, that never reaches the window's border finds one; the voxel then takes the other side.
+/// Returns the voxels changed.
 std::int64_t drop_specks(Voxmap& phi, Progress& progress) {
     const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
     const float h = float(phi.voxel_size);
