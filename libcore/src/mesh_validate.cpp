@@ -176,7 +176,7 @@ void validate_off(const std::string& path, const std::string& head, std::uintmax
 
 namespace {
 
-/// A PLY scalar type: its size in bytes, whether it is an integer and its range.
+/// A PLY scalar type: its size in bytes, whether it is an integer, whether it is signed.
 struct PlyType {
     std::uint64_t size = 0;
     bool integer = false, is_signed = false;
@@ -299,7 +299,8 @@ void walk_ply_body(const std::string& path, const PlyHeader& header, const std::
         return std::string_view(body).substr(start, at - start);
     };
     auto ascii_number = [&](const PlyType& type) -> double {
-        const std::string_view t = token();
+        std::string_view t = token();
+        if (t.size() > 1 && t[0] == '+') t.remove_prefix(1); // from_chars takes no plus sign; stream input does
         if (type.integer) {
             std::int64_t v = 0;
             const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
