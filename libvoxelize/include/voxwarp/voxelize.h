@@ -49,7 +49,8 @@ std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeO
 SignMethod resolve_sign_method(const TriangleMesh& mesh);
 
 /// Voxelize a mesh (world units) into an antialiased voxmap whose voxel (0,0,0) centre sits padding_voxels
-/// voxels below the mesh's minimum corner. Parallel (oneTBB).
+/// voxels below the mesh's minimum corner. Parallel (oneTBB). The densities' capacity holds a quarter more
+/// voxels (address space only, never touched), which a consuming warp(WarpDomain&&) reuses for its target.
 /// @throw InvalidInput (see voxelize_frame), ResourceLimit when the estimate exceeds the memory limit,
 ///        Cancelled when the progress callback returns false.
 Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
