@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <numeric>
+#include <random>
 
 namespace voxwarp {
 namespace {
@@ -115,8 +116,8 @@ TEST(RoundTrip, BunnyMatchesOpenVDBAccuracy) {
 
 // The snowden bust is a hollow shell whose walls are 0.059 units thick: 0.94 voxel at 128 voxels. Such a wall
 // often holds no voxel centre; voxelize keeps it (keep_thin_walls) and drops crumbs (drop_specks), so the scan
-// must come out as one closed solid, its Euler characteristic that of the shell and its openings (measured -4
-// at 128 and -2 at 256), not hundreds of tunnels.
+// must come out as one closed solid, its Euler characteristic that of the shell and its openings (measured -2
+// at 128 and at 256), not hundreds of tunnels.
 TEST(RoundTrip, SnowdenScanBecomesOneClosedSolidWithoutTunnels) {
     const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
     ASSERT_FALSE(topology(scan).watertight()); // the point of the test: an open, non-manifold scan
@@ -133,13 +134,50 @@ TEST(RoundTrip, SnowdenScanBecomesOneClosedSolidWithoutTunnels) {
         EXPECT_LE(t.euler, 4) << resolution;
         const DistanceStats d = one_sided_distance(scan, out);
         std::printf("snowden@%d input->output distance: mean %.4f p99 %.4f max %.4f (voxels)\n", resolution, d.mean / h, d.p99 / h, d.max / h);
-        // Where a wall thinner than a voxel holds no voxel centre, both its faces fall between the same two
-        // samples and one face cannot be placed (an edge holds one crossing): at 128 the mean stays near 0.16
-        // voxel, at 256 (1.9-voxel walls) near 0.05. The sheet in front of the eyes (0.5 % of the area, open,
-        // enclosing nothing) vanishes, which is most of the p99.
-        EXPECT_LE(d.mean / h, resolution == 128 ? 0.2 : 0.06) << resolution;
-        EXPECT_LE(d.p99 / h, 1.0) << resolution;
+        // Where a wall holds no voxel centre, the outside voxel made inside to keep it moves the face near it by up
+        // to half the gap (measured mean 0.08 voxel at 128, 0.05 at 256). The p99 is the scan's folds thinner than
+        // half a voxel (ears, collar: 2.5 % of the area at 128) and its creases, which come out rounded.
+        EXPECT_LE(d.mean / h, resolution == 128 ? 0.1 : 0.06) << resolution;
+        EXPECT_LE(d.p99 / h, resolution == 128 ? 0.8 : 1.0) << resolution;
     }
+}
+
+// Plates about a voxel thick, turned so that they cross the grid's axes, face diagonals and body diagonals at
+// many angles (signed by the winding number, the path that keeps thin walls): the wall must hold everywhere (one
+// closed plate, Euler 2; a plate along a face diagonal once came apart into strips) with its faces in place.
+TEST(RoundTrip, ThinPlatesHoldAtAnyOrientation) {
+    constexpr double h = 1.0 / 32;
+    std::mt19937 rng(7);
+    std::normal_distribution<double> normal;
+    std::vector<Eigen::Quaterniond> turns{Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(1, 1, 1)),
+                                          Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(1, 1, 0))};
+    for (int r = 0; r < 6; ++r) turns.push_back(Eigen::Quaterniond(normal(rng), normal(rng), normal(rng), normal(rng)).normalized());
+    for (const double thickness : {0.5, 0.8, 1.4})
+        for (std::size_t r = 0; r < turns.size(); ++r) {
+            TriangleMesh plate = test::box_mesh({-0.5, -0.5, -0.5 * thickness * h}, {0.5, 0.5, 0.5 * thickness * h}, 8);
+            const Eigen::Vector3d offset(0.3 * h, 0.1 * h, 0.7 * h);
+            for (auto& v : plate.vertices) v = turns[r] * v + offset;
+            const Voxmap voxmap = voxelize(plate, {.voxel_size = h, .sign = SignMethod::winding_number});
+            const TriangleMesh out = extract(voxmap);
+            expect_closed_manifold(out);
+            const MeshTopology t = topology(out);
+            EXPECT_EQ(t.components, 1) << "thickness " << thickness << ", turn " << r;
+            EXPECT_EQ(t.euler, 2) << "thickness " << thickness << ", turn " << r;
+            // The plate's two faces, away from its rims (which come out rounded, as any edge sharper than a voxel).
+            std::vector<Eigen::Vector3d> face_points;
+            for (int side = -1; side <= 1; side += 2)
+                for (int a = 0; a <= 40; ++a)
+                    for (int b = 0; b <= 40; ++b)
+                        face_points.push_back(turns[r] * Eigen::Vector3d(-0.4 + 0.02 * a, -0.4 + 0.02 * b, 0.5 * side * thickness * h) + offset);
+            const std::vector<double> distance = distances_to_surface(face_points, out);
+            const double mean = std::accumulate(distance.begin(), distance.end(), 0.0) / double(distance.size()) / h;
+            const double worst = *std::max_element(distance.begin(), distance.end()) / h;
+            std::printf("plate %.1f voxel, turn %zu: faces mean %.3f max %.3f voxel\n", thickness, r, mean, worst);
+            // A wall that holds voxel centres is placed exactly (up to the fit's weak pull); where it holds none, the
+            // nearer outside voxel is made inside and the face moves to it: up to half the gap it left.
+            EXPECT_LE(mean, thickness < 0.6 ? 0.2 : thickness < 1 ? 0.1 : 0.01) << "thickness " << thickness << ", turn " << r;
+            EXPECT_LE(worst, thickness < 1 ? 0.5 : 0.05) << "thickness " << thickness << ", turn " << r;
+        }
 }
 
 TEST(Decimate, ReachesTheTargetAndKeepsTheSphere) {

@@ -41,5 +41,21 @@ TEST(WindingNumber, HierarchyMatchesExactSum) {
     EXPECT_GT(w({0, 0, 0.2}), 0.5);
 }
 
+TEST(WindingNumber, SegmentCrossingsAreWhereTheSegmentMeetsTheSurface) {
+    const TriangleMesh box = test::box_mesh({-1, -1, -1}, {1, 1, 1}, 4);
+    const WindingNumber w(box);
+    // Through the box from x = -3 to x = 3, off every vertex and edge: the faces x = -1 and x = 1.
+    const auto through = w.crossings({-3, 0.1, 0.3}, {3, 0.1, 0.3});
+    EXPECT_EQ(through.count, 2);
+    EXPECT_NEAR(through.first, 2.0 / 6.0, 1e-12);
+    EXPECT_NEAR(through.last, 4.0 / 6.0, 1e-12);
+    // From inside out through one oblique face point; a segment that stops short; one that passes beside the box.
+    const auto out = w.crossings({0.2, 0.1, 0.3}, {0.2, 0.1, 3.3});
+    EXPECT_EQ(out.count, 1);
+    EXPECT_NEAR(out.first, 0.7 / 3.0, 1e-12);
+    EXPECT_EQ(w.crossings({-0.5, 0.1, 0.3}, {0.5, 0.1, 0.3}).count, 0);
+    EXPECT_EQ(w.crossings({-3, 1.5, 0.3}, {3, 1.5, 0.3}).count, 0);
+}
+
 } // namespace
 } // namespace voxwarp

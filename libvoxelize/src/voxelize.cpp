@@ -7,7 +7,9 @@
 #include <openvdb/tools/MeshToVolume.h>
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <cmath>
 #include <cstdio>
@@ -171,52 +173,87 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
     progress.report(1.0);
 }
 
-/// Keep walls thinner than a voxel. Where such a wall passes between two neighbouring voxel centres (along an
-/// edge, a face diagonal or a body diagonal of the grid) without containing either, both read as outside and
-/// the wall would vanish there, leaving a tunnel. For every such pair (both ends outside and close enough to the
-/// surface for the wall to fit between them, midpoint inside) the end nearer the wall is made inside, with the
-/// signed distance that puts its outward crossing, interpolated to the next voxel out, at the wall's face:
-/// phi = -u (1 + u) / (1 - u) voxels, u = the end's distance to the face. Checking all 26 neighbours, not just
-/// the 6 along the axes, is what closes oblique walls: afterwards no two outside voxels on opposite sides of a
-/// wall at least ~0.87 voxel thick are neighbours in any direction, so the extracted surface cannot open
-/// between them. The wall comes out about a voxel thick, its outer faces in place. Returns the voxels changed.
-std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, double orientation, Progress& progress) {
+/// Keep walls thinner than a voxel. Two kinds of voxel pairs let the extracted surface open through a wall:
+/// - neighbours along an axis, both outside, with the wall between them (it holds neither centre);
+/// - the outside corners of an ambiguous grid face (inside corners on one diagonal, outside on the other), with
+///   the wall between the outside pair: VolumeToMesh decides such a face by the signs alone and may join the
+///   outside corners, cutting the wall along the face (a plate along a face diagonal came apart into strips).
+/// For each, the end nearer the wall is made inside. The mesh separates a pair when the segment between the two
+/// centres crosses it; only pairs near the surface are tested. Making a voxel inside can leave new ambiguous
+/// faces, so the face pass repeats until none is left (the inside only grows: it ends). The values set here are
+/// provisional, just inside; fit_crossings then places the surface. Ambiguous cube interiors (two opposite
+/// corners outside) need nothing: VolumeToMesh keeps the two corners apart. Returns the voxels changed.
+std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress& progress) {
     const double h = phi.voxel_size;
+    const float near = float(2 * h), inside_value = float(-0.05 * h);
     const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
-    std::vector<float> replacement(phi.density.size(), 0.0f);
-    auto inside_value = [h](float value) {
-        const double u = std::min(0.9, double(value) / h);
-        return float(-h * u * (1 + u) / (1 - u));
+    const std::int64_t strides[3] = {1, nx, nx * ny};
+    auto separated = [&](std::int64_t a, std::int64_t b) {
+        auto centre = [&](std::int64_t v) { return phi.world(double(v % nx), double((v / nx) % ny), double(v / (nx * ny))); };
+        return winding.crossings(centre(a), centre(b)).count > 0;
+    };
+    // The end of an outside pair to make inside: the one nearer the surface (ties: the lower index).
+    auto nearer = [&](std::int64_t a, std::int64_t b) {
+        const float pa = phi.density[std::size_t(a)], pb = phi.density[std::size_t(b)];
+        return pa < pb || (pa == pb && a < b) ? a : b;
+    };
+    auto apply = [&](tbb::enumerable_thread_specific<std::vector<std::int64_t>>& found) {
+        std::int64_t changed = 0;
+        for (auto& list : found)
+            for (const std::int64_t v : list)
+                if (phi.density[std::size_t(v)] >= 0) phi.density[std::size_t(v)] = inside_value, ++changed;
+        return changed;
     };
     progress.stage("thin walls");
+    // Axis pairs. A voxel is tested against its +x, +y, +z neighbours.
+    tbb::enumerable_thread_specific<std::vector<std::int64_t>> axis_found;
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
         if (progress.cancelled()) return;
+        auto& list = axis_found.local();
         for (std::int64_t k = r.begin(); k != r.end(); ++k)
             for (std::int64_t j = 0; j < ny; ++j)
                 for (std::int64_t i = 0; i < nx; ++i) {
-                    const float pa = phi.density[std::size_t(phi.index(i, j, k))];
-                    if (!(pa > 0 && pa < 1.75 * h)) continue;
-                    bool marked = false;
-                    for (int dz = -1; dz <= 1 && !marked; ++dz)
-                        for (int dy = -1; dy <= 1 && !marked; ++dy)
-                            for (int dx = -1; dx <= 1 && !marked; ++dx) {
-                                const std::int64_t x = i + dx, y = j + dy, z = k + dz;
-                                if ((dx | dy | dz) == 0 || x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) continue;
-                                const float pb = phi.density[std::size_t(phi.index(x, y, z))];
-                                const double length = h * std::sqrt(double(dx * dx + dy * dy + dz * dz));
-                                if (!(pb > 0 && pa + pb < length)) continue;
-                                // One end per pair suffices to block it: the one nearer the wall (ties: the lower index).
-                                if (pb < pa || (pb == pa && phi.index(x, y, z) < phi.index(i, j, k))) continue;
-                                const Eigen::Vector3d mid = phi.world(double(i) + 0.5 * dx, double(j) + 0.5 * dy, double(k) + 0.5 * dz);
-                                marked = orientation * winding(mid) >= 0.5;
-                            }
-                    if (marked) replacement[std::size_t(phi.index(i, j, k))] = inside_value(pa);
+                    const std::int64_t a = phi.index(i, j, k), at[3] = {i, j, k}, extent[3] = {nx, ny, nz};
+                    const float pa = phi.density[std::size_t(a)];
+                    if (!(pa >= 0 && pa < near)) continue;
+                    for (int axis = 0; axis < 3; ++axis) {
+                        if (at[axis] + 1 >= extent[axis]) continue;
+                        const std::int64_t b = a + strides[axis];
+                        const float pb = phi.density[std::size_t(b)];
+                        if (pb >= 0 && pb < near && separated(a, b)) list.push_back(nearer(a, b));
+                    }
                 }
     });
     progress.check();
-    std::int64_t changed = 0;
-    for (std::size_t v = 0; v < replacement.size(); ++v)
-        if (replacement[v] < 0) phi.density[v] = replacement[v], ++changed;
+    std::int64_t changed = apply(axis_found);
+    // Ambiguous faces, until none is left. A voxel is the low corner of its three faces.
+    for (bool again = true; again;) {
+        tbb::enumerable_thread_specific<std::vector<std::int64_t>> face_found;
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
+            if (progress.cancelled()) return;
+            auto& list = face_found.local();
+            for (std::int64_t k = r.begin(); k != r.end(); ++k)
+                for (std::int64_t j = 0; j < ny; ++j)
+                    for (std::int64_t i = 0; i < nx; ++i) {
+                        const std::int64_t a = phi.index(i, j, k), at[3] = {i, j, k}, extent[3] = {nx, ny, nz};
+                        if (!(std::abs(phi.density[std::size_t(a)]) < near)) continue;
+                        for (int u = 0; u < 3; ++u) {
+                            const int v = (u + 1) % 3;
+                            if (at[u] + 1 >= extent[u] || at[v] + 1 >= extent[v]) continue;
+                            const std::int64_t b = a + strides[u], c = a + strides[v], d = b + strides[v];
+                            const bool ia = phi.density[std::size_t(a)] < 0, ib = phi.density[std::size_t(b)] < 0;
+                            const bool ic = phi.density[std::size_t(c)] < 0, id = phi.density[std::size_t(d)] < 0;
+                            if (ia != id || ib != ic || ia == ib) continue; // not ambiguous
+                            const std::int64_t p = ia ? b : a, q = ia ? c : d; // the outside diagonal
+                            if (separated(p, q)) list.push_back(nearer(p, q));
+                        }
+                    }
+        });
+        progress.check();
+        const std::int64_t more = apply(face_found);
+        changed += more;
+        again = more > 0;
+    }
     return changed;
 }
 
@@ -274,6 +311,94 @@ std::int64_t drop_specks(Voxmap& phi, Progress& progress) {
     for (std::size_t v = 0; v < speck.size(); ++v)
         if (speck[v]) phi.density[v] = phi.density[v] < 0 ? 0.5f * h : -0.5f * h, ++changed;
     return changed;
+}
+
+/// Put the surface where the mesh crosses the grid. VolumeToMesh places the surface on each voxel edge whose ends
+/// lie on opposite sides at the linearly interpolated zero of phi, and (1 - t) phi_a + t phi_b = 0 is linear in
+/// the two values, so each such edge gives one linear equation once t is known. A signed distance satisfies them
+/// for a locally flat surface, but inside a wall thinner than two voxels a voxel's distance is to the nearer face
+/// only, which misplaces the far face's crossing by up to a third of a voxel. t comes from the mesh, measured from
+/// the inside end a:
+/// - the mesh crosses the edge an odd number of times: the first crossing (once, in a clean wall);
+/// - an even number, at least two: a is a voxel keep_thin_walls made inside and the wall lies between: the far
+///   face, the last crossing;
+/// - none: a was made inside, or the winding number closes a hole there: the surface belongs at a itself, t = 0.
+/// The values of the voxels on such edges are refit by least squares over all their equations plus a weak pull
+/// (weight `kPull`) towards the distance, by red-black Gauss-Seidel (an edge joins voxels of opposite parity, so
+/// each colour updates in parallel, and the result does not depend on the thread count), each value kept on its
+/// side and within the ramp. Returns the voxels refit.
+std::int64_t fit_crossings(Voxmap& phi, const WindingNumber& winding, double ramp_voxels, Progress& progress) {
+    constexpr double kPull = 0.05;
+    constexpr int kSweeps = 16; // converged: 200 sweeps place the surface no differently on the scan
+    const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
+    const std::int64_t strides[3] = {1, nx, nx * ny};
+    struct Term {
+        std::int64_t voxel, other;
+        float own, coupled; // the equation is own * phi[voxel] + coupled * phi[other] = 0
+    };
+    progress.stage("crossings");
+    tbb::enumerable_thread_specific<std::vector<Term>> found;
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
+        if (progress.cancelled()) return;
+        auto& terms = found.local();
+        for (std::int64_t k = r.begin(); k != r.end(); ++k)
+            for (std::int64_t j = 0; j < ny; ++j)
+                for (std::int64_t i = 0; i < nx; ++i) {
+                    const std::int64_t a = phi.index(i, j, k);
+                    if (!(phi.density[std::size_t(a)] < 0)) continue; // each edge once, from its inside end
+                    const std::int64_t at[3] = {i, j, k}, extent[3] = {nx, ny, nz};
+                    for (int axis = 0; axis < 3; ++axis)
+                        for (const int step : {-1, 1}) {
+                            if (at[axis] + step < 0 || at[axis] + step >= extent[axis]) continue;
+                            const std::int64_t b = a + step * strides[axis];
+                            if (phi.density[std::size_t(b)] < 0) continue;
+                            Eigen::Vector3d q = phi.world(double(i), double(j), double(k));
+                            q[axis] += step * phi.voxel_size;
+                            const auto hits = winding.crossings(phi.world(double(i), double(j), double(k)), q);
+                            const double t = hits.count % 2 == 1 ? hits.first : hits.last;
+                            terms.push_back({a, b, float(1 - t), float(t)});
+                            terms.push_back({b, a, float(t), float(1 - t)});
+                        }
+                }
+    });
+    progress.check();
+    std::vector<Term> terms;
+    for (auto& local : found) terms.insert(terms.end(), local.begin(), local.end());
+    tbb::parallel_sort(terms.begin(), terms.end(), [](const Term& x, const Term& y) { return x.voxel < y.voxel || (x.voxel == y.voxel && x.other < y.other); });
+    // The voxels to refit, split by colour: (first term, end of terms) ranges into `terms`.
+    std::vector<std::pair<std::size_t, std::size_t>> colour[2];
+    for (std::size_t first = 0; first < terms.size();) {
+        std::size_t last = first + 1;
+        while (last < terms.size() && terms[last].voxel == terms[first].voxel) ++last;
+        const std::int64_t v = terms[first].voxel;
+        colour[((v % nx) + (v / nx) % ny + v / (nx * ny)) & 1].emplace_back(first, last);
+        first = last;
+    }
+    const float limit = float(ramp_voxels * phi.voxel_size), margin = float(0.01 * phi.voxel_size);
+    std::vector<float> start[2];
+    for (int c = 0; c < 2; ++c) {
+        start[c].resize(colour[c].size());
+        for (std::size_t n = 0; n < colour[c].size(); ++n) start[c][n] = phi.density[std::size_t(terms[colour[c][n].first].voxel)];
+    }
+    for (int sweep = 0; sweep < kSweeps; ++sweep) {
+        for (int c = 0; c < 2; ++c)
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, colour[c].size(), 1024), [&](const auto& r) {
+                for (std::size_t n = r.begin(); n != r.end(); ++n) {
+                    const auto [first, last] = colour[c][n];
+                    const float phi0 = start[c][n];
+                    double numerator = kPull * phi0, denominator = kPull;
+                    for (std::size_t e = first; e < last; ++e) {
+                        numerator -= double(terms[e].own) * terms[e].coupled * phi.density[std::size_t(terms[e].other)];
+                        denominator += double(terms[e].own) * terms[e].own;
+                    }
+                    const float value = float(numerator / denominator);
+                    phi.density[std::size_t(terms[first].voxel)] =
+                        phi0 < 0 ? std::clamp(value, -limit, -margin) : std::clamp(value, margin, limit);
+                }
+            });
+        progress.report(double(sweep + 1) / kSweeps);
+    }
+    return std::int64_t(colour[0].size() + colour[1].size());
 }
 
 /// Write f(grid value) into every voxel of the dense voxmap (grid index = voxmap index), in parallel over
@@ -342,12 +467,13 @@ Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options) 
 std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
     const Voxmap frame = voxelize_frame(mesh, options);
     // The dense density plus the sparse narrow band (about a 7-voxel shell of the surface, ~16 bytes a voxel
-    // with tree overhead) plus the mesh's own copies.
+    // with tree overhead), the crossing equations of the winding-number path (about 1.5 edges per unit of area
+    // in voxels, two 24-byte terms each), plus the mesh's own copies.
     const double h = frame.voxel_size;
     double area = 0;
     for (const auto& t : mesh.triangles)
         area += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
-    const double band = (area / (h * h)) * (2 * (options.ramp_voxels + 2)) * 16.0;
+    const double band = (area / (h * h)) * ((2 * (options.ramp_voxels + 2)) * 16.0 + 1.5 * 2 * 24);
     return voxmap_bytes(frame.dims) + std::uint64_t(band) + mesh.vertices.size() * 64 + mesh.face_count() * 64;
 }
 
@@ -388,8 +514,9 @@ Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options) {
         const auto band = winding_number_band(soup, winding, orientation, *xform, half_width, progress);
         grid_to_dense(*band, voxmap, [](float phi) { return phi; });
         sign_off_band(voxmap, band->background(), winding, orientation, progress);
-        keep_thin_walls(voxmap, winding, orientation, progress);
+        keep_thin_walls(voxmap, winding, progress);
         drop_specks(voxmap, progress);
+        fit_crossings(voxmap, winding, options.ramp_voxels, progress);
         progress.stage("density");
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = ramp(voxmap.density[i]);

@@ -141,4 +141,47 @@ double WindingNumber::exact(const Eigen::Vector3d& q) const {
     return omega / (4.0 * std::numbers::pi);
 }
 
+WindingNumber::Crossings WindingNumber::crossings(const Eigen::Vector3d& p, const Eigen::Vector3d& q) const {
+    const auto& tree = *tree_;
+    Crossings result;
+    if (tree.nodes.empty() || tree.a.empty()) return result;
+    const Eigen::Vector3d d = q - p;
+    const double length2 = d.squaredNorm();
+    result.first = 2.0;
+    std::int32_t stack[128];
+    int top = 0;
+    stack[top++] = 0;
+    while (top > 0) {
+        const auto& node = tree.nodes[std::size_t(stack[--top])];
+        // Distance from the cluster's centre to the segment against its bounding radius.
+        const double s = length2 > 0 ? std::clamp((node.centre - p).dot(d) / length2, 0.0, 1.0) : 0.0;
+        if ((p + s * d - node.centre).squaredNorm() > node.radius * node.radius) continue;
+        if (node.left < 0 || top + 2 > 128) {
+            for (std::int32_t i = node.first; i < node.first + node.count; ++i) {
+                // Moller-Trumbore: p + u d = a + v (b - a) + w (c - a).
+                const Eigen::Vector3d e1 = tree.b[i] - tree.a[i], e2 = tree.c[i] - tree.a[i];
+                const Eigen::Vector3d pv = d.cross(e2);
+                const double det = e1.dot(pv);
+                if (std::abs(det) < 1e-300) continue; // parallel to the triangle's plane, or a degenerate triangle
+                const Eigen::Vector3d tv = p - tree.a[i];
+                const double v = tv.dot(pv) / det;
+                if (v < 0 || v > 1) continue;
+                const Eigen::Vector3d qv = tv.cross(e1);
+                const double w = d.dot(qv) / det;
+                if (w < 0 || v + w > 1) continue;
+                const double u = e2.dot(qv) / det;
+                if (u < 0 || u > 1) continue;
+                ++result.count;
+                result.first = std::min(result.first, u);
+                result.last = std::max(result.last, u);
+            }
+        } else {
+            stack[top++] = node.left;
+            stack[top++] = node.right;
+        }
+    }
+    if (result.count == 0) result.first = 0;
+    return result;
+}
+
 } // namespace voxwarp

@@ -9,7 +9,9 @@
 /// Inside/outside: a watertight, consistently oriented mesh is signed by OpenVDB's level-set construction;
 /// anything else (holes, non-manifold edges, inconsistent orientation) by the generalized winding number
 /// thresholded at 0.5, which closes small holes with a minimal-looking cap and ignores stray triangles.
-/// Open sheets and parts thinner than about a voxel enclose no volume and vanish from the voxmap.
+/// On that path walls thinner than a voxel are kept closed (a voxel next to the wall is made inside) and the
+/// densities next to the surface are refit so that the 0.5 crossing along each voxel edge lands where the mesh
+/// crosses that edge. Open sheets enclose no volume and vanish from the voxmap.
 #pragma once
 
 #include <voxwarp/progress.h>
