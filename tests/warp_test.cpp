@@ -58,7 +58,7 @@ TEST(Basis, TableSumsToOneAndMatchesClosedForm) {
 
 TEST(Lattice, UndeformedUniformMapIsTheAffineIdentity) {
     const Lattice l = Lattice::uniform({6, 5, 7}, {1, 2, 3}, {0.5, 0.25, 2});
-    for (const Eigen::Vector3d stu : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(3, 2, 4), Eigen::Vector3d(1.3, 0.7, 2.9)}) {
+    for (const Eigen::Vector3d& stu : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(3, 2, 4), Eigen::Vector3d(1.3, 0.7, 2.9)}) {
         EXPECT_NEAR((l.evaluate(stu) - Eigen::Vector3d(1 + 0.5 * stu.x(), 2 + 0.25 * stu.y(), 3 + 2 * stu.z())).norm(), 0.0, 1e-12);
         EXPECT_NEAR((l.parameter_of(l.evaluate(stu)) - stu).norm(), 0.0, 1e-12);
     }
@@ -81,7 +81,7 @@ TEST(Lattice, ClampedImageIsExactlyTheDataBox) {
         EXPECT_TRUE((p.array() >= lo.array() - 1e-12).all() && (p.array() <= hi.array() + 1e-12).all());
     }
     // A face of the parameter box maps onto the matching face of the data box.
-    EXPECT_NEAR(l.evaluate({r[0], 0.37 * r[1], 0.81 * r[2]}).x(), hi.x(), 1e-12);
+    EXPECT_NEAR(l.evaluate(Eigen::Vector3d(r[0], 0.37 * r[1], 0.81 * r[2])).x(), hi.x(), 1e-12);
 }
 
 TEST(Warp, UndeformedUniformLatticeIsIdentity) {

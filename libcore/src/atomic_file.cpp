@@ -12,8 +12,10 @@ void write_atomically(const std::string& path, const std::function<void(const st
     const fs::path target(path);
     // The temporary keeps the target's extension: writers choose the format by it.
     std::random_device rd;
-    const fs::path tmp = target.parent_path() /
-                         ("." + target.stem().string() + ".tmp" + std::to_string(rd() % 1000000) + target.extension().string());
+    // Built by appending: GCC 12 misreads "." + std::string as an overlapping copy (-Wrestrict, its bug 105329).
+    std::string name(".");
+    name.append(target.stem().string()).append(".tmp").append(std::to_string(rd() % 1000000)).append(target.extension().string());
+    const fs::path tmp = target.parent_path() / name;
     try {
         write(tmp.string());
         std::error_code ec;
