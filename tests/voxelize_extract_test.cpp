@@ -152,7 +152,7 @@ TEST(RoundTrip, ThinPlatesHoldAtAnyOrientation) {
     std::vector<Eigen::Quaterniond> turns{Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(1, 1, 1)),
                                           Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), Eigen::Vector3d(1, 1, 0))};
     for (int r = 0; r < 6; ++r) turns.push_back(Eigen::Quaterniond(normal(rng), normal(rng), normal(rng), normal(rng)).normalized());
-    for (const double thickness : {0.5, 0.8, 1.4})
+    for (const double thickness : {0.25, 0.5, 0.8, 1.4})
         for (std::size_t r = 0; r < turns.size(); ++r) {
             TriangleMesh plate = test::box_mesh({-0.5, -0.5, -0.5 * thickness * h}, {0.5, 0.5, 0.5 * thickness * h}, 8);
             const Eigen::Vector3d offset(0.3 * h, 0.1 * h, 0.7 * h);
@@ -172,10 +172,10 @@ TEST(RoundTrip, ThinPlatesHoldAtAnyOrientation) {
             const std::vector<double> distance = distances_to_surface(face_points, out);
             const double mean = std::accumulate(distance.begin(), distance.end(), 0.0) / double(distance.size()) / h;
             const double worst = *std::max_element(distance.begin(), distance.end()) / h;
-            std::printf("plate %.1f voxel, turn %zu: faces mean %.3f max %.3f voxel\n", thickness, r, mean, worst);
+            std::printf("plate %.2f voxel, turn %zu: faces mean %.3f max %.3f voxel\n", thickness, r, mean, worst);
             // A wall that holds voxel centres is placed exactly (up to the fit's weak pull); where it holds none, the
             // nearer outside voxel is made inside and the face moves to it: up to half the gap it left.
-            EXPECT_LE(mean, thickness < 0.6 ? 0.2 : thickness < 1 ? 0.1 : 0.01) << "thickness " << thickness << ", turn " << r;
+            EXPECT_LE(mean, thickness < 0.6 ? 0.3 : thickness < 1 ? 0.1 : 0.01) << "thickness " << thickness << ", turn " << r;
             EXPECT_LE(worst, thickness < 1 ? 0.5 : 0.05) << "thickness " << thickness << ", turn " << r;
         }
 }
