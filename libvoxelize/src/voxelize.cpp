@@ -192,21 +192,31 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress
         auto centre = [&](std::int64_t v) { return phi.world(double(v % nx), double((v / nx) % ny), double(v / (nx * ny))); };
         return winding.crossings(centre(a), centre(b)).count > 0;
     };
-    // The end of an outside pair to make inside: the one nearer the surface (ties: the lower index).
+    // An outside pair as (the end to make inside: the one nearer the surface, ties the lower index; the other).
     auto nearer = [&](std::int64_t a, std::int64_t b) {
         const float pa = phi.density[std::size_t(a)], pb = phi.density[std::size_t(b)];
-        return pa < pb || (pa == pb && a < b) ? a : b;
+        return pa < pb || (pa == pb && a < b) ? std::pair{a, b} : std::pair{b, a};
     };
-    auto apply = [&](tbb::enumerable_thread_specific<std::vector<std::int64_t>>& found) {
+    // Block each pair found by making one end inside, smallest gap first: a pair that an earlier one's voxel
+    // already blocks (one of its ends is inside now) needs nothing, so fewer voxels move, and those that move
+    // move the least. Sorted, the outcome does not depend on the order threads found the pairs in.
+    using Pair = std::pair<std::int64_t, std::int64_t>; // (the end to make inside, the other)
+    auto apply = [&](tbb::enumerable_thread_specific<std::vector<Pair>>& found) {
+        std::vector<Pair> pairs;
+        for (auto& list : found) pairs.insert(pairs.end(), list.begin(), list.end());
+        tbb::parallel_sort(pairs.begin(), pairs.end(), [&](const Pair& x, const Pair& y) {
+            const float dx = phi.density[std::size_t(x.first)], dy = phi.density[std::size_t(y.first)];
+            return dx < dy || (dx == dy && x < y);
+        });
         std::int64_t changed = 0;
-        for (auto& list : found)
-            for (const std::int64_t v : list)
-                if (phi.density[std::size_t(v)] >= 0) phi.density[std::size_t(v)] = inside_value, ++changed;
+        for (const auto& [flip, other] : pairs)
+            if (phi.density[std::size_t(flip)] >= 0 && phi.density[std::size_t(other)] >= 0)
+                phi.density[std::size_t(flip)] = inside_value, ++changed;
         return changed;
     };
     progress.stage("thin walls");
     // Axis pairs. A voxel is tested against its +x, +y, +z neighbours.
-    tbb::enumerable_thread_specific<std::vector<std::int64_t>> axis_found;
+    tbb::enumerable_thread_specific<std::vector<Pair>> axis_found;
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
         if (progress.cancelled()) return;
         auto& list = axis_found.local();
@@ -228,7 +238,7 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress
     std::int64_t changed = apply(axis_found);
     // Ambiguous faces, until none is left. A voxel is the low corner of its three faces.
     for (bool again = true; again;) {
-        tbb::enumerable_thread_specific<std::vector<std::int64_t>> face_found;
+        tbb::enumerable_thread_specific<std::vector<Pair>> face_found;
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
             if (progress.cancelled()) return;
             auto& list = face_found.local();
