@@ -188,9 +188,13 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress
     const float near = float(2 * h), inside_value = float(-0.05 * h);
     const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
     const std::int64_t strides[3] = {1, nx, nx * ny};
+    // Whether the mesh separates two outside voxels. A crossing point x would give pa <= |a - x| and pb <= |b - x|
+    // for their distances to the mesh, so pa + pb > |a - b| rules it out without a query.
     auto separated = [&](std::int64_t a, std::int64_t b) {
         auto centre = [&](std::int64_t v) { return phi.world(double(v % nx), double((v / nx) % ny), double(v / (nx * ny))); };
-        return winding.crossings(centre(a), centre(b)).count > 0;
+        const Eigen::Vector3d pa = centre(a), pb = centre(b);
+        if (double(phi.density[std::size_t(a)]) + double(phi.density[std::size_t(b)]) > (pa - pb).norm() * (1 + 1e-4)) return false;
+        return winding.crossings(pa, pb).count > 0;
     };
     // An outside pair as (the end to make inside: the one nearer the surface, ties the lower index; the other).
     auto nearer = [&](std::int64_t a, std::int64_t b) {
