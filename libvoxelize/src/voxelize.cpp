@@ -218,55 +218,52 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress
                 phi.density[std::size_t(flip)] = inside_value, ++changed;
         return changed;
     };
-    progress.stage("thin walls");
-    // Axis pairs. A voxel is tested against its +x, +y, +z neighbours.
-    tbb::enumerable_thread_specific<std::vector<Pair>> axis_found;
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
-        if (progress.cancelled()) return;
-        auto& list = axis_found.local();
-        for (std::int64_t k = r.begin(); k != r.end(); ++k)
-            for (std::int64_t j = 0; j < ny; ++j)
-                for (std::int64_t i = 0; i < nx; ++i) {
-                    const std::int64_t a = phi.index(i, j, k), at[3] = {i, j, k}, extent[3] = {nx, ny, nz};
-                    const float pa = phi.density[std::size_t(a)];
-                    if (!(pa >= 0 && pa < near)) continue;
-                    for (int axis = 0; axis < 3; ++axis) {
-                        if (at[axis] + 1 >= extent[axis]) continue;
-                        const std::int64_t b = a + strides[axis];
-                        const float pb = phi.density[std::size_t(b)];
-                        if (pb >= 0 && pb < near && separated(a, b)) list.push_back(nearer(a, b));
-                    }
-                }
-    });
-    progress.check();
-    std::int64_t changed = apply(axis_found);
-    // Ambiguous faces, until none is left. A voxel is the low corner of its three faces.
-    for (bool again = true; again;) {
-        tbb::enumerable_thread_specific<std::vector<Pair>> face_found;
+    // Find pairs by `test(a, at, list)` at every voxel a (at: its index triple), in parallel over z-slabs, and
+    // block them; returns the voxels changed.
+    auto collect = [&](auto&& test) {
+        tbb::enumerable_thread_specific<std::vector<Pair>> found;
         tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
             if (progress.cancelled()) return;
-            auto& list = face_found.local();
+            auto& list = found.local();
             for (std::int64_t k = r.begin(); k != r.end(); ++k)
                 for (std::int64_t j = 0; j < ny; ++j)
                     for (std::int64_t i = 0; i < nx; ++i) {
-                        const std::int64_t a = phi.index(i, j, k), at[3] = {i, j, k}, extent[3] = {nx, ny, nz};
-                        if (!(std::abs(phi.density[std::size_t(a)]) < near)) continue;
-                        for (int u = 0; u < 3; ++u) {
-                            const int v = (u + 1) % 3;
-                            if (at[u] + 1 >= extent[u] || at[v] + 1 >= extent[v]) continue;
-                            const std::int64_t b = a + strides[u], c = a + strides[v], d = b + strides[v];
-                            const bool ia = phi.density[std::size_t(a)] < 0, ib = phi.density[std::size_t(b)] < 0;
-                            const bool ic = phi.density[std::size_t(c)] < 0, id = phi.density[std::size_t(d)] < 0;
-                            if (ia != id || ib != ic || ia == ib) continue; // not ambiguous
-                            const std::int64_t p = ia ? b : a, q = ia ? c : d; // the outside diagonal
-                            if (separated(p, q)) list.push_back(nearer(p, q));
-                        }
+                        const std::int64_t at[3] = {i, j, k};
+                        test(phi.index(i, j, k), at, list);
                     }
         });
         progress.check();
-        const std::int64_t more = apply(face_found);
+        return apply(found);
+    };
+    const std::int64_t extent[3] = {nx, ny, nz};
+    progress.stage("thin walls");
+    // Axis pairs: a voxel against its +x, +y, +z neighbours.
+    std::int64_t changed = collect([&](std::int64_t a, const std::int64_t* at, std::vector<Pair>& list) {
+        const float pa = phi.density[std::size_t(a)];
+        if (!(pa >= 0 && pa < near)) return;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (at[axis] + 1 >= extent[axis]) continue;
+            const std::int64_t b = a + strides[axis];
+            const float pb = phi.density[std::size_t(b)];
+            if (pb >= 0 && pb < near && separated(a, b)) list.push_back(nearer(a, b));
+        }
+    });
+    // Ambiguous faces, until none is left: a voxel is the low corner of its three faces.
+    for (std::int64_t more = 1; more > 0;) {
+        more = collect([&](std::int64_t a, const std::int64_t* at, std::vector<Pair>& list) {
+            if (!(std::abs(phi.density[std::size_t(a)]) < near)) return;
+            for (int u = 0; u < 3; ++u) {
+                const int v = (u + 1) % 3;
+                if (at[u] + 1 >= extent[u] || at[v] + 1 >= extent[v]) continue;
+                const std::int64_t b = a + strides[u], c = a + strides[v], d = b + strides[v];
+                const bool ia = phi.density[std::size_t(a)] < 0, ib = phi.density[std::size_t(b)] < 0;
+                const bool ic = phi.density[std::size_t(c)] < 0, id = phi.density[std::size_t(d)] < 0;
+                if (ia != id || ib != ic || ia == ib) continue; // not ambiguous
+                const std::int64_t p = ia ? b : a, q = ia ? c : d; // the outside diagonal
+                if (separated(p, q)) list.push_back(nearer(p, q));
+            }
+        });
         changed += more;
-        again = more > 0;
     }
     return changed;
 }
