@@ -13,6 +13,7 @@ struct WindingNumber::Tree {
         Eigen::Vector3d area_normal = Eigen::Vector3d::Zero(); // sum of area * unit normal (= half cross products)
         Eigen::Matrix3d second = Eigen::Matrix3d::Zero();      // sum of area_normal_t (centroid_t - centre)^T, the second-order moment
         double radius = 0;           // farthest triangle vertex from centre
+        Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero(); // the triangles' bounding box, for segment queries
         std::int32_t first = 0, count = 0; // leaf: range in `order`
         std::int32_t left = -1, right = -1;
     };
@@ -67,10 +68,14 @@ WindingNumber::WindingNumber(const TriangleMesh& mesh, double beta) : tree_(std:
         }
         Eigen::Vector3d centre = area_sum > 0 ? Eigen::Vector3d(weighted / area_sum) : Eigen::Vector3d(0.5 * (lo + hi));
         double radius = 0;
+        Eigen::Vector3d box_lo = Eigen::Vector3d::Constant(1e300), box_hi = -box_lo;
         Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
         for (std::int32_t i = job.first; i < job.first + job.count; ++i) {
             const auto& tri = mesh.triangles[order[i]];
-            for (int k = 0; k < 3; ++k) radius = std::max(radius, (mesh.vertices[tri[k]] - centre).norm());
+            for (int k = 0; k < 3; ++k) {
+                radius = std::max(radius, (mesh.vertices[tri[k]] - centre).norm());
+                box_lo = box_lo.cwiseMin(mesh.vertices[tri[k]]), box_hi = box_hi.cwiseMax(mesh.vertices[tri[k]]);
+            }
             const Eigen::Vector3d half_cross =
                 0.5 * (mesh.vertices[tri[1]] - mesh.vertices[tri[0]]).cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
             second += half_cross * (centroid[order[i]] - centre).transpose();
@@ -80,6 +85,7 @@ WindingNumber::WindingNumber(const TriangleMesh& mesh, double beta) : tree_(std:
         node.area_normal = area_normal;
         node.second = second;
         node.radius = radius;
+        node.lo = box_lo, node.hi = box_hi;
         node.first = job.first;
         node.count = job.count;
         if (job.count <= leaf_size) continue;
@@ -146,16 +152,25 @@ WindingNumber::Crossings WindingNumber::crossings(const Eigen::Vector3d& p, cons
     Crossings result;
     if (tree.nodes.empty() || tree.a.empty()) return result;
     const Eigen::Vector3d d = q - p;
-    const double length2 = d.squaredNorm();
     result.first = 2.0;
     std::int32_t stack[128];
     int top = 0;
     stack[top++] = 0;
     while (top > 0) {
         const auto& node = tree.nodes[std::size_t(stack[--top])];
-        // Distance from the cluster's centre to the segment against its bounding radius.
-        const double s = length2 > 0 ? std::clamp((node.centre - p).dot(d) / length2, 0.0, 1.0) : 0.0;
-        if ((p + s * d - node.centre).squaredNorm() > node.radius * node.radius) continue;
+        // The segment against the cluster's bounding box (slabs), padded by a hair for rounding.
+        double enter = 0, leave = 1;
+        for (int a = 0; a < 3 && enter <= leave; ++a) {
+            const double pad = 1e-9 * (std::abs(node.lo[a]) + std::abs(node.hi[a]) + 1);
+            const double lo = node.lo[a] - pad - p[a], hi = node.hi[a] + pad - p[a];
+            if (d[a] == 0) {
+                if (lo > 0 || hi < 0) leave = -1;
+                continue;
+            }
+            const double t0 = lo / d[a], t1 = hi / d[a];
+            enter = std::max(enter, std::min(t0, t1)), leave = std::min(leave, std::max(t0, t1));
+        }
+        if (enter > leave) continue;
         if (node.left < 0 || top + 2 > 128) {
             for (std::int32_t i = node.first; i < node.first + node.count; ++i) {
                 // Moller-Trumbore: p + u d = a + v (b - a) + w (c - a).
