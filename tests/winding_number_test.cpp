@@ -49,7 +49,7 @@ TEST(WindingNumber, SegmentCrossingsAreWhereTheSegmentMeetsTheSurface) {
     EXPECT_EQ(through.count, 2);
     EXPECT_NEAR(through.first, 2.0 / 6.0, 1e-12);
     EXPECT_NEAR(through.last, 4.0 / 6.0, 1e-12);
-    // From inside out through one oblique face point; a segment that stops short; one that passes beside the box.
+    // From inside out through the face z = 1; a segment that stops short of the faces; one that passes beside the box.
     const auto out = w.crossings({0.2, 0.1, 0.3}, {0.2, 0.1, 3.3});
     EXPECT_EQ(out.count, 1);
     EXPECT_NEAR(out.first, 0.7 / 3.0, 1e-12);

@@ -32,7 +32,7 @@ public:
     /// Exact O(T) sum over all triangles, for testing the hierarchy against.
     double exact(const Eigen::Vector3d& q) const;
 
-    /// Where the segment p -> q passes through the triangles (the same hierarchy, its clusters' bounding spheres
+    /// Where the segment p -> q passes through the triangles (the same hierarchy, its clusters' bounding boxes
     /// culling): how many it passes through, and the parameters in [0, 1] along it of the first and the last
     /// (both 0 when there is none). Thread-safe.
     struct Crossings {
