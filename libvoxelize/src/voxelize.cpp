@@ -358,14 +358,15 @@ std::int64_t fit_crossings(Voxmap& phi, const WindingNumber& winding, double ram
                     const std::int64_t a = phi.index(i, j, k);
                     if (!(phi.density[std::size_t(a)] < 0)) continue; // each edge once, from its inside end
                     const std::int64_t at[3] = {i, j, k}, extent[3] = {nx, ny, nz};
+                    const Eigen::Vector3d centre = phi.world(double(i), double(j), double(k));
                     for (int axis = 0; axis < 3; ++axis)
                         for (const int step : {-1, 1}) {
                             if (at[axis] + step < 0 || at[axis] + step >= extent[axis]) continue;
                             const std::int64_t b = a + step * strides[axis];
                             if (phi.density[std::size_t(b)] < 0) continue;
-                            Eigen::Vector3d q = phi.world(double(i), double(j), double(k));
+                            Eigen::Vector3d q = centre;
                             q[axis] += step * phi.voxel_size;
-                            const auto hits = winding.crossings(phi.world(double(i), double(j), double(k)), q);
+                            const auto hits = winding.crossings(centre, q);
                             const double t = hits.count % 2 == 1 ? hits.first : hits.last;
                             terms.push_back({a, b, float(1 - t), float(t)});
                             terms.push_back({b, a, float(t), float(1 - t)});
