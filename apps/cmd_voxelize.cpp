@@ -34,10 +34,11 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
             o.max_memory_bytes = std::uint64_t(args->max_memory_gib * double(1ull << 30));
             o.progress = stderr_progress(global);
             const TriangleMesh mesh = read_mesh(args->input);
-            const Voxmap voxmap = naming_source(args->input, [&] { return voxelize(mesh, o); });
+            const SparseVoxmap voxmap = naming_source(args->input, [&] { return voxelize_sparse(mesh, o); });
             write_vdb(voxmap, args->output);
-            note(global, "wrote " + args->output + ": " + std::to_string(voxmap.dims[0]) + "x" + std::to_string(voxmap.dims[1]) + "x" +
-                             std::to_string(voxmap.dims[2]) + " voxels of size " + std::to_string(voxmap.voxel_size));
+            const auto& n = voxmap.dims();
+            note(global, "wrote " + args->output + ": " + std::to_string(n[0]) + "x" + std::to_string(n[1]) + "x" + std::to_string(n[2]) +
+                             " voxels of size " + std::to_string(voxmap.voxel_size()));
         };
     });
 }

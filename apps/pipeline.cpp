@@ -69,15 +69,16 @@ void record(EditReport& er, const ConstraintSolution& solution, const std::vecto
 
 using namespace pipeline_internal;
 
-Voxmap deform_voxmap(Voxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     Progress progress(options.progress, "deform");
-    report.voxel_size = voxmap.voxel_size;
-    report.dims = voxmap.dims;
+    report.voxel_size = voxmap.voxel_size();
+    report.dims = voxmap.dims();
     report.volume_before = enclosed_volume(voxmap);
-    const double h = voxmap.voxel_size;
+    const double h = voxmap.voxel_size();
     for (std::size_t e = 0; e < script.edits.size(); ++e) {
         const auto& constraints = script.edits[e].constraints;
-        const Eigen::Vector3d lo = voxmap.origin, hi = voxmap.world(double(voxmap.dims[0] - 1), double(voxmap.dims[1] - 1), double(voxmap.dims[2] - 1));
+        const auto& n = voxmap.dims();
+        const Eigen::Vector3d lo = voxmap.origin(), hi = voxmap.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
         EditReport er;
         auto t = Clock::now();
@@ -110,7 +111,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     auto t = Clock::now();
     VoxelizeOptions vo = options.voxelize;
     vo.progress = options.progress;
-    Voxmap voxmap = voxelize(mesh, vo);
+    SparseVoxmap voxmap = voxelize_sparse(mesh, vo);
     report.seconds_voxelize = seconds_since(t);
     voxmap = deform_voxmap(std::move(voxmap), script, options, report);
     t = Clock::now();
@@ -132,8 +133,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         if (e == 0) report.voxel_size = frame.voxel_size, report.dims = frame.dims, report.volume_before = enclosed_volume(out);
         const Eigen::Vector3d lo = frame.origin, hi = frame.world(double(frame.dims[0] - 1), double(frame.dims[1] - 1), double(frame.dims[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
-        frame.density.assign(std::size_t(frame.voxel_count()), 0.0f);
-        const WarpDomain domain = make_domain(frame, script.lattice, options.voxelize.max_memory_bytes);
+        const WarpDomain domain = make_domain(SparseVoxmap(frame.dims, frame.origin, frame.voxel_size), script.lattice, options.voxelize.max_memory_bytes);
         // Vertex mode applies the whole edit as one map: moving vertices needs no injective steps.
         EditReport er;
         const ConstraintSolution solution = solve_constraints(domain.lattice, constraints);

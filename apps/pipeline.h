@@ -47,7 +47,7 @@ struct DeformReport {
 
 /// Apply every edit of `script` to a voxmap (each edit on a fresh lattice over the previous result).
 /// @throw InvalidInput for constraints far outside the model; see solve_constraints, warp.
-Voxmap deform_voxmap(Voxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report);
+SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report);
 
 /// Mesh in, re-polygonized deformed mesh out.
 TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report);

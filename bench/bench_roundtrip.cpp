@@ -18,7 +18,7 @@ BENCHMARK(BM_RoundTripOpenVDB)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kM
 static void BM_RoundTrip(benchmark::State& state) {
     const TriangleMesh& bunny = bunny_mesh();
     for (auto _ : state) {
-        const Voxmap voxmap = voxelize(bunny, {.resolution = int(state.range(0))});
+        const SparseVoxmap voxmap = voxelize_sparse(bunny, {.resolution = int(state.range(0))});
         benchmark::DoNotOptimize(extract(voxmap));
     }
 }

@@ -87,7 +87,7 @@ TEST(Lattice, ClampedImageIsExactlyTheDataBox) {
 TEST(Warp, UndeformedUniformLatticeIsIdentity) {
     const Voxmap input = sphere_voxmap();
     const WarpDomain domain = make_domain(input, {.size = {9, 9, 9}});
-    const Voxmap out = warp(domain, domain.lattice);
+    const Voxmap out = to_dense(warp(domain, domain.lattice));
     EXPECT_LE(max_difference(input, out), 1e-5);
 }
 
@@ -97,7 +97,7 @@ TEST(Warp, IntegerTranslationShiftsTheDataExactly) {
     Lattice moved = domain.lattice;
     const Eigen::Vector3d shift = input.voxel_size * Eigen::Vector3d(3, -2, 5);
     for (auto& p : moved.points()) p += shift;
-    const Voxmap out = warp(domain, moved);
+    const Voxmap out = to_dense(warp(domain, moved));
     Voxmap shifted = input;
     shifted.origin += shift;
     EXPECT_LE(max_difference(shifted, out), 1e-6);
@@ -109,7 +109,7 @@ TEST(Warp, UniformScaleByTwoMultipliesVolumeByEight) {
     Lattice scaled = domain.lattice;
     const Eigen::Vector3d centre(0.1, -0.2, 0.3);
     for (auto& p : scaled.points()) p = centre + 2.0 * (p - centre);
-    const Voxmap out = warp(domain, scaled);
+    const Voxmap out = to_dense(warp(domain, scaled));
     EXPECT_NEAR(enclosed_volume(out), 8 * enclosed_volume(input), 0.01 * 8 * enclosed_volume(input));
     // And the surface is the analytic sphere of radius 2.
     const TriangleMesh mesh = extract(out);
@@ -147,7 +147,7 @@ TEST(Warp, FastPathMatchesTheNaiveReference) {
     const Voxmap input = sphere_voxmap(20);
     const WarpDomain domain = make_domain(input, {.size = {7, 7, 7}});
     const Lattice moved = jiggled(domain.lattice, 11, 0.8 * input.voxel_size);
-    EXPECT_LE(max_difference(warp(domain, moved), warp_reference(domain, moved)), 1e-6);
+    EXPECT_LE(max_difference(to_dense(warp(domain, moved)), warp_reference(domain, moved)), 1e-6);
 }
 
 TEST(Warp, NarrowBandMatchesTheNaiveReferenceOnALargeInterior) {
@@ -156,7 +156,7 @@ TEST(Warp, NarrowBandMatchesTheNaiveReferenceOnALargeInterior) {
     const Voxmap input = sphere_voxmap(40);
     const WarpDomain domain = make_domain(input, {.size = {6, 6, 6}});
     const Lattice moved = jiggled(domain.lattice, 3, 1.5 * input.voxel_size);
-    const Voxmap fast = warp(domain, moved);
+    const Voxmap fast = to_dense(warp(domain, moved));
     EXPECT_LE(max_difference(fast, warp_reference(domain, moved)), 1e-6);
     std::size_t full = 0;
     for (float d : fast.density) full += d == 1.0f;
@@ -172,7 +172,7 @@ TEST(Warp, RotationLeavesNoDensityDipsInside) {
     const Eigen::Matrix3d R = Eigen::AngleAxisd(30.0 * std::numbers::pi / 180, Eigen::Vector3d::UnitZ()).toRotationMatrix();
     Lattice rotated = domain.lattice;
     for (auto& p : rotated.points()) p = R * p;
-    const Voxmap out = warp(domain, rotated);
+    const Voxmap out = to_dense(warp(domain, rotated));
     const double margin = 2.5 * input.voxel_size; // beyond the reach of the surface's fractional voxels
     std::size_t deep = 0;
     float lowest = 1.0f;
@@ -197,8 +197,8 @@ TEST(Warp, IncrementalEqualsFullRecompute) {
         const int i = ix(rng), j = iy(rng), k = iz(rng);
         progressive.move_control_point(i, j, k, progressive.lattice().point(i, j, k) + Eigen::Vector3d(n(rng), n(rng), n(rng)));
     }
-    const Voxmap incremental = progressive.target();
-    const Voxmap full = warp(domain, progressive.lattice());
+    const Voxmap incremental = to_dense(progressive.target());
+    const Voxmap full = to_dense(warp(domain, progressive.lattice()));
     // Fixed-point sums make the two bit-identical, wherever each target's bounds lie.
     EXPECT_EQ(max_difference(incremental, full), 0.0);
 }
@@ -208,17 +208,17 @@ TEST(Warp, SameResultForAnyThreadCount) {
     const WarpDomain domain = make_domain(input, {});
     Lattice moved = domain.lattice;
     moved.set_point(4, 4, 4, moved.point(4, 4, 4) + Eigen::Vector3d(2, 1, 0) * input.voxel_size);
-    const Voxmap parallel = warp(domain, moved);
+    const Voxmap parallel = to_dense(warp(domain, moved));
     tbb::task_arena one(1);
     Voxmap serial;
-    one.execute([&] { serial = warp(domain, moved); });
+    one.execute([&] { serial = to_dense(warp(domain, moved)); });
     EXPECT_EQ(parallel.density, serial.density);
 }
 
 TEST(Warp, ClampedCaptureWarpsTheSameData) {
     const Voxmap input = sphere_voxmap();
     const WarpDomain domain = make_domain(input, {.placement = Placement::clamped});
-    const Voxmap out = warp(domain, domain.lattice);
+    const Voxmap out = to_dense(warp(domain, domain.lattice));
     EXPECT_NEAR(enclosed_volume(out), enclosed_volume(input), 0.02 * enclosed_volume(input));
     const TriangleMesh mesh = extract(out);
     double sum = 0;

@@ -13,78 +13,66 @@
 
 namespace voxwarp::vdb_internal {
 
-openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap) {
-    auto xform = openvdb::math::Transform::createLinearTransform(voxmap.voxel_size);
-    xform->postTranslate(openvdb::Vec3d(voxmap.origin.x(), voxmap.origin.y(), voxmap.origin.z()));
+openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, double voxel_size) {
+    auto xform = openvdb::math::Transform::createLinearTransform(voxel_size);
+    xform->postTranslate(openvdb::Vec3d(origin.x(), origin.y(), origin.z()));
     return xform;
 }
 
-openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap) {
-    // Classify the voxmap's 8^3 blocks (aligned with OpenVDB's leaves) in parallel: all background, uniform
-    // (a tile), or mixed (a leaf, built in parallel). Only the tree insertions are serial. copyFromDense did
-    // the same job visiting every voxel through the tree, and was a seventh of a 512^3 round trip.
+openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap) { return voxmap_transform(voxmap.origin, voxmap.voxel_size); }
+
+openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap) {
+    // The voxmap's blocks are OpenVDB's leaves: a stored block becomes a leaf (built in parallel, transposed
+    // from x fastest to OpenVDB's z fastest), a uniform nonzero block a tile. Only the tree insertions are serial.
     using LeafT = openvdb::FloatTree::LeafNodeType;
-    constexpr std::int64_t B = LeafT::DIM;
-    const std::int64_t nx = voxmap.dims[0], ny = voxmap.dims[1], nz = voxmap.dims[2];
-    const std::int64_t bx = (nx + B - 1) / B, by = (ny + B - 1) / B, bz = (nz + B - 1) / B;
-    const std::size_t blocks = std::size_t(bx * by * bz);
+    static_assert(LeafT::DIM == SparseVoxmap::kSide);
+    constexpr std::int64_t B = SparseVoxmap::kSide;
+    const auto& bd = voxmap.block_dims();
+    const std::size_t blocks = std::size_t(voxmap.block_count());
+    auto block_origin = [&](std::size_t b) {
+        return openvdb::Coord(int(std::int64_t(b % std::size_t(bd[0])) * B), int(std::int64_t((b / std::size_t(bd[0])) % std::size_t(bd[1])) * B),
+                              int(std::int64_t(b / std::size_t(bd[0] * bd[1])) * B));
+    };
     std::vector<LeafT*> leaves(blocks, nullptr);
-    std::vector<float> tile(blocks, 0.0f);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const auto& range) {
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
-            const std::int64_t i0 = std::int64_t(b % std::size_t(bx)) * B, j0 = std::int64_t((b / std::size_t(bx)) % std::size_t(by)) * B,
-                               k0 = std::int64_t(b / std::size_t(bx * by)) * B;
-            auto value = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
-                return i < nx && j < ny && k < nz ? voxmap.at(i, j, k) : 0.0f; // past the voxmap: background
-            };
-            const float first = value(i0, j0, k0);
-            bool uniform = true;
-            if (i0 + B <= nx && j0 + B <= ny && k0 + B <= nz) { // inside the voxmap: whole rows, bit patterns
-                const std::uint32_t pattern = std::bit_cast<std::uint32_t>(first);
-                for (std::int64_t k = k0; k < k0 + B && uniform; ++k)
-                    for (std::int64_t j = j0; j < j0 + B && uniform; ++j) {
-                        const float* row = &voxmap.density[std::size_t(voxmap.index(i0, j, k))];
-                        std::uint32_t differs = 0;
-                        for (std::int64_t i = 0; i < B; ++i) differs |= std::bit_cast<std::uint32_t>(row[i]) ^ pattern;
-                        uniform = differs == 0;
-                    }
-            } else {
-                for (std::int64_t k = k0; k < k0 + B && uniform; ++k)
-                    for (std::int64_t j = j0; j < j0 + B && uniform; ++j)
-                        for (std::int64_t i = i0; i < i0 + B; ++i)
-                            if (value(i, j, k) != first) {
-                                uniform = false;
-                                break;
-                            }
-            }
-            if (uniform) {
-                tile[b] = first;
-                continue;
-            }
-            auto* leaf = new LeafT(openvdb::Coord(int(i0), int(j0), int(k0)), 0.0f, false);
-            for (std::int64_t k = 0; k < B; ++k)
-                for (std::int64_t j = 0; j < B; ++j)
-                    for (std::int64_t i = 0; i < B; ++i) {
-                        const float v = value(i0 + i, j0 + j, k0 + k);
-                        if (v != 0.0f) leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(int(i0 + i), int(j0 + j), int(k0 + k))), v);
-                    }
+            const float* values = voxmap.block_values(std::int64_t(b));
+            if (!values) continue;
+            auto* leaf = new LeafT(block_origin(b), 0.0f, false);
+            for (int k = 0; k < B; ++k)
+                for (int j = 0; j < B; ++j)
+                    for (int i = 0; i < B; ++i)
+                        if (const float v = values[i + B * (j + B * k)]; v != 0.0f) leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(i, j, k)), v);
             leaves[b] = leaf;
         }
     });
     auto grid = openvdb::FloatGrid::create(0.0f);
     auto& tree = grid->tree();
+    const auto& dims = voxmap.dims();
     for (std::size_t b = 0; b < blocks; ++b) {
         if (leaves[b]) {
             tree.addLeaf(leaves[b]);
-        } else if (tile[b] != 0.0f) {
-            const openvdb::Coord origin(int(std::int64_t(b % std::size_t(bx)) * B), int(std::int64_t((b / std::size_t(bx)) % std::size_t(by)) * B),
-                                        int(std::int64_t(b / std::size_t(bx * by)) * B));
-            tree.addTile(1, origin, tile[b], true); // level 1: a tile the size of one leaf
+            continue;
         }
+        const float u = voxmap.block_uniform(std::int64_t(b));
+        if (u == 0.0f) continue;
+        const openvdb::Coord origin = block_origin(b);
+        if (origin.x() + B <= dims[0] && origin.y() + B <= dims[1] && origin.z() + B <= dims[2]) {
+            tree.addTile(1, origin, u, true); // level 1: a tile the size of one leaf
+            continue;
+        }
+        // A border block: past dims the voxmap reads 0, so only the voxels inside take the value.
+        auto* leaf = new LeafT(origin, 0.0f, false);
+        for (int k = 0; k < B && origin.z() + k < dims[2]; ++k)
+            for (int j = 0; j < B && origin.y() + j < dims[1]; ++j)
+                for (int i = 0; i < B && origin.x() + i < dims[0]; ++i) leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(i, j, k)), u);
+        tree.addLeaf(leaf);
     }
-    grid->setTransform(voxmap_transform(voxmap));
+    grid->setTransform(voxmap_transform(voxmap.origin(), voxmap.voxel_size()));
     return grid;
 }
+
+openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap) { return to_density_grid(to_sparse(voxmap)); }
 
 Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source) {
     const auto& xform = grid.transform();

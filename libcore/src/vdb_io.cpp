@@ -12,13 +12,13 @@
 
 namespace voxwarp {
 
-void write_vdb(const Voxmap& voxmap, const std::string& path) {
-    openvdb::initialize();
-    auto grid = vdb_internal::to_density_grid(voxmap);
+namespace {
+
+void write_density_grid(openvdb::FloatGrid::Ptr grid, const std::array<std::int64_t, 3>& dims, const std::string& path) {
     grid->setName("density");
     grid->setGridClass(openvdb::GRID_FOG_VOLUME);
     grid->insertMeta("voxwarp_density_convention", openvdb::StringMetadata("density in [0,1], surface at 0.5"));
-    grid->insertMeta("voxwarp_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(int(voxmap.dims[0]), int(voxmap.dims[1]), int(voxmap.dims[2]))));
+    grid->insertMeta("voxwarp_dims", openvdb::Vec3IMetadata(openvdb::Vec3i(int(dims[0]), int(dims[1]), int(dims[2]))));
     write_atomically(path, [&](const std::string& tmp) {
         try {
             openvdb::io::File file(tmp);
@@ -28,6 +28,18 @@ void write_vdb(const Voxmap& voxmap, const std::string& path) {
             throw IOError(path + ": writing failed: " + e.what());
         }
     });
+}
+
+} // namespace
+
+void write_vdb(const Voxmap& voxmap, const std::string& path) {
+    openvdb::initialize();
+    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims, path);
+}
+
+void write_vdb(const SparseVoxmap& voxmap, const std::string& path) {
+    openvdb::initialize();
+    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims(), path);
 }
 
 Voxmap read_vdb(const std::string& path, const std::string& grid_name) {

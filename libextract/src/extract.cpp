@@ -8,15 +8,16 @@
 
 namespace voxwarp {
 
-TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options) {
+namespace {
+
+void check(const ExtractOptions& options) {
     if (!(options.isovalue > 0 && options.isovalue < 1))
         throw InvalidInput("extract: isovalue " + std::to_string(options.isovalue) + " is outside (0, 1)");
     if (!(options.adaptivity >= 0 && options.adaptivity <= 1))
         throw InvalidInput("extract: adaptivity " + std::to_string(options.adaptivity) + " is outside [0, 1]");
-    openvdb::initialize();
-    Progress progress(options.progress, "extract");
-    progress.report(0.0);
-    const auto grid = vdb_internal::to_density_grid(voxmap);
+}
+
+TriangleMesh extract_grid(const openvdb::FloatGrid::Ptr& grid, const ExtractOptions& options, Progress& progress) {
     progress.report(0.3);
 
     std::vector<openvdb::Vec3s> points;
@@ -37,6 +38,21 @@ TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options) {
     if (!options.quads) mesh = mesh.triangulated();
     progress.report(1.0);
     return mesh;
+}
+
+} // namespace
+
+TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options) {
+    check(options);
+    return extract(to_sparse(voxmap), options);
+}
+
+TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) {
+    check(options);
+    openvdb::initialize();
+    Progress progress(options.progress, "extract");
+    progress.report(0.0);
+    return extract_grid(vdb_internal::to_density_grid(voxmap), options, progress);
 }
 
 } // namespace voxwarp

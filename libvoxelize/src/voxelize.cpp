@@ -445,6 +445,32 @@ void grid_to_dense(const openvdb::FloatGrid& grid, Voxmap& out, F&& f) {
     });
 }
 
+/// The same into a sparse voxmap: a leaf becomes a block (stored unless f makes it uniform, as deep inside or
+/// far outside the ramp), a tile or background block one value.
+template <class F>
+void grid_to_sparse(const openvdb::FloatGrid& grid, SparseVoxmap& out, F&& f) {
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    constexpr std::int64_t B = SparseVoxmap::kSide;
+    static_assert(LeafT::DIM == B);
+    const auto& bd = out.block_dims();
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, out.block_count()), [&](const auto& range) {
+        auto accessor = grid.getConstAccessor();
+        float block[SparseVoxmap::kBlockVoxels];
+        for (std::int64_t b = range.begin(); b != range.end(); ++b) {
+            const openvdb::Coord origin{int((b % bd[0]) * B), int(((b / bd[0]) % bd[1]) * B), int((b / (bd[0] * bd[1])) * B)};
+            if (const LeafT* leaf = accessor.probeConstLeaf(origin)) {
+                const float* values = leaf->buffer().data();
+                for (std::int64_t k = 0; k < B; ++k)
+                    for (std::int64_t j = 0; j < B; ++j)
+                        for (std::int64_t i = 0; i < B; ++i) block[i + B * (j + B * k)] = f(values[(i << 6) | (j << 3) | k]);
+                out.set_block(b, block);
+            } else {
+                out.set_uniform(b, f(accessor.getValue(origin)));
+            }
+        }
+    });
+}
+
 } // namespace voxelize_internal
 
 using namespace voxelize_internal;
@@ -476,69 +502,123 @@ Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options) 
     return frame;
 }
 
-std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options, bool sparse) {
     const Voxmap frame = voxelize_frame(mesh, options);
-    // The dense density plus the sparse narrow band (about a 7-voxel shell of the surface, ~16 bytes a voxel
-    // with tree overhead), the crossing equations of the winding-number path (about 1.5 edges per unit of area
-    // in voxels, two 24-byte terms each), plus the mesh's own copies.
+    // The sparse narrow band (about a 7-voxel shell of the surface, ~16 bytes a voxel with tree overhead), the
+    // crossing equations of the winding-number path (about 1.5 edges per unit of area in voxels, two 24-byte
+    // terms each), the mesh's own copies, and the result: dense, or blocks of 8^3 floats along the surface
+    // (a flat surface meets about 3 blocks per 64 voxels of its area, each 2 KiB). The winding-number path
+    // builds a dense volume first either way.
     const double h = frame.voxel_size;
     double area = 0;
     for (const auto& t : mesh.triangles)
         area += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
-    const double band = (area / (h * h)) * ((2 * (options.ramp_voxels + 2)) * 16.0 + 1.5 * 2 * 24);
-    return voxmap_bytes(frame.dims) + std::uint64_t(band) + mesh.vertices.size() * 64 + mesh.face_count() * 64;
+    const double surface = area / (h * h);
+    const double band = surface * ((2 * (options.ramp_voxels + 2)) * 16.0 + 1.5 * 2 * 24);
+    const SignMethod method = options.sign == SignMethod::automatic ? resolve_sign_method(mesh) : options.sign;
+    const bool dense = !sparse || method == SignMethod::winding_number;
+    const double blocks = std::min(double(frame.voxel_count()) * sizeof(float), surface * 3.0 / 64.0 * 2048.0);
+    return (dense ? voxmap_bytes(frame.dims) : 0) + std::uint64_t(band + (sparse ? blocks : 0.0)) + mesh.vertices.size() * 64 +
+           mesh.face_count() * 64;
 }
 
 SignMethod resolve_sign_method(const TriangleMesh& mesh) { return topology(mesh).watertight() ? SignMethod::flood_fill : SignMethod::winding_number; }
 
-Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options) {
-    openvdb::initialize();
-    Voxmap voxmap = voxelize_frame(mesh, options);
-    require_memory(voxelize_memory_estimate(mesh, options), options.max_memory_bytes,
-                   "voxelizing at " + std::to_string(voxmap.dims[0]) + "x" + std::to_string(voxmap.dims[1]) + "x" + std::to_string(voxmap.dims[2]));
-    Progress progress(options.progress, "level set");
-    const auto xform = vdb_internal::voxmap_transform(voxmap);
-    const float half_width = float(options.ramp_voxels + 1.5);
-    const SignMethod method = options.sign == SignMethod::automatic ? resolve_sign_method(mesh) : options.sign;
+namespace voxelize_internal {
 
-    // Address space for a quarter more voxels, never touched here: a consuming warp (warp.h) writes its target,
-    // usually a little larger than its input, into this memory instead of faulting in fresh pages.
-    voxmap.density.reserve(std::size_t(voxmap.voxel_count() + voxmap.voxel_count() / 4));
-    voxmap.density.resize(std::size_t(voxmap.voxel_count())); // uninitialised: grid_to_dense writes every voxel
-    const float scale = float(0.5 / (options.ramp_voxels * voxmap.voxel_size));
-    auto ramp = [scale](float phi) {
+/// The density ramp: 1 inside, 0 outside, linear across 2 ramp_voxels voxels around phi = 0 (world units).
+struct Ramp {
+    float scale;
+    float operator()(float phi) const {
         const float d = 0.5f - phi * scale;
         return d < 0 ? 0.0f : (d > 1 ? 1.0f : d);
-    };
-    if (method == SignMethod::flood_fill) {
-        vdb_internal::ProgressInterrupter interrupter{&progress};
-        const auto level_set = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupter, *xform, vdb_points(mesh), vdb_triangles(mesh),
-                                                                                   std::vector<openvdb::Vec4I>{}, half_width);
-        progress.check();
-        progress.stage("density");
-        grid_to_dense(*level_set, voxmap, ramp);
-    } else {
-        const TriangleMesh triangulated = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
-        const TriangleMesh& soup = mesh.quads.empty() ? mesh : triangulated;
-        // A mesh whose faces mostly point inwards would read as inside-out; flip the winding number for it.
-        const double orientation = enclosed_volume(soup) < 0 ? -1.0 : 1.0;
-        // Only w >= 0.5 is asked of it, and w is 0 or 1 away from holes: a far-field error up to 0.06 (acceptance
-        // 2, against 0.02 at the default 3) moves only a few voxels of a hole's cap on the bundled scan, and
-        // voxelizes it 1.6x faster.
-        const WindingNumber winding(soup, 2.0);
-        const auto band = winding_number_band(soup, winding, orientation, *xform, half_width, progress);
-        grid_to_dense(*band, voxmap, [](float phi) { return phi; });
-        sign_off_band(voxmap, band->background(), winding, orientation, progress);
-        keep_thin_walls(voxmap, winding, progress);
-        drop_specks(voxmap, progress);
-        fit_crossings(voxmap, winding, options.ramp_voxels, progress);
-        progress.stage("density");
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = ramp(voxmap.density[i]);
-        });
     }
-    progress.report(1.0);
-    return voxmap;
+};
+
+/// The flood-fill path's signed distance: OpenVDB's narrow-band level set of a watertight mesh.
+openvdb::FloatGrid::Ptr flood_fill_level_set(const TriangleMesh& mesh, const openvdb::math::Transform& xform, float half_width, Progress& progress) {
+    vdb_internal::ProgressInterrupter interrupter{&progress};
+    auto level_set = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupter, xform, vdb_points(mesh), vdb_triangles(mesh),
+                                                                         std::vector<openvdb::Vec4I>{}, half_width);
+    progress.check();
+    return level_set;
+}
+
+/// The winding-number path (scans): the dense signed distance, signed by the winding number, thin walls kept,
+/// specks dropped and the crossings refit, then ramped to density in place.
+void voxelize_scan(const TriangleMesh& mesh, const openvdb::math::Transform& xform, float half_width, const VoxelizeOptions& options, Ramp ramp,
+                   Voxmap& voxmap, Progress& progress) {
+    const TriangleMesh triangulated = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
+    const TriangleMesh& soup = mesh.quads.empty() ? mesh : triangulated;
+    // A mesh whose faces mostly point inwards would read as inside-out; flip the winding number for it.
+    const double orientation = enclosed_volume(soup) < 0 ? -1.0 : 1.0;
+    // Only w >= 0.5 is asked of it, and w is 0 or 1 away from holes: a far-field error up to 0.06 (acceptance
+    // 2, against 0.02 at the default 3) moves only a few voxels of a hole's cap on the bundled scan, and
+    // voxelizes it 1.6x faster.
+    const WindingNumber winding(soup, 2.0);
+    const auto band = winding_number_band(soup, winding, orientation, xform, half_width, progress);
+    voxmap.density.resize(std::size_t(voxmap.voxel_count())); // uninitialised: grid_to_dense writes every voxel
+    grid_to_dense(*band, voxmap, [](float phi) { return phi; });
+    sign_off_band(voxmap, band->background(), winding, orientation, progress);
+    keep_thin_walls(voxmap, winding, progress);
+    drop_specks(voxmap, progress);
+    fit_crossings(voxmap, winding, options.ramp_voxels, progress);
+    progress.stage("density");
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = ramp(voxmap.density[i]);
+    });
+}
+
+/// What both voxelize functions share before the heavy work: the frame, the memory check, the set-up.
+struct Job {
+    Voxmap frame;
+    Progress progress;
+    openvdb::math::Transform::Ptr xform;
+    float half_width;
+    SignMethod method;
+    Ramp ramp;
+    Job(const TriangleMesh& mesh, const VoxelizeOptions& options, bool sparse)
+        : frame(voxelize_frame(mesh, options)), progress(options.progress, "level set") {
+        openvdb::initialize();
+        require_memory(voxelize_memory_estimate(mesh, options, sparse), options.max_memory_bytes,
+                       "voxelizing at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
+        xform = vdb_internal::voxmap_transform(frame);
+        half_width = float(options.ramp_voxels + 1.5);
+        method = options.sign == SignMethod::automatic ? resolve_sign_method(mesh) : options.sign;
+        ramp = Ramp{float(0.5 / (options.ramp_voxels * frame.voxel_size))};
+    }
+};
+
+} // namespace voxelize_internal
+
+Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    Job job(mesh, options, false);
+    if (job.method == SignMethod::flood_fill) {
+        const auto level_set = flood_fill_level_set(mesh, *job.xform, job.half_width, job.progress);
+        job.progress.stage("density");
+        job.frame.density.resize(std::size_t(job.frame.voxel_count())); // uninitialised: grid_to_dense writes every voxel
+        grid_to_dense(*level_set, job.frame, job.ramp);
+    } else {
+        voxelize_scan(mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
+    }
+    job.progress.report(1.0);
+    return std::move(job.frame);
+}
+
+SparseVoxmap voxelize_sparse(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    Job job(mesh, options, true);
+    SparseVoxmap out;
+    if (job.method == SignMethod::flood_fill) {
+        const auto level_set = flood_fill_level_set(mesh, *job.xform, job.half_width, job.progress);
+        job.progress.stage("density");
+        out = SparseVoxmap(job.frame.dims, job.frame.origin, job.frame.voxel_size);
+        grid_to_sparse(*level_set, out, job.ramp);
+    } else {
+        voxelize_scan(mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
+        out = to_sparse(job.frame);
+    }
+    job.progress.report(1.0);
+    return out;
 }
 
 } // namespace voxwarp

@@ -24,25 +24,31 @@ void check_spec(const LatticeSpec& spec) {
 
 } // namespace
 
-WarpDomain make_domain(Voxmap input, const LatticeSpec& spec, std::uint64_t max_memory_bytes) {
+WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64_t max_memory_bytes) {
     check_spec(spec);
     if (input.voxel_count() <= 0 || input.density.size() != std::size_t(input.voxel_count())) throw InvalidInput("warp: the voxmap is empty");
-    const double h = input.voxel_size;
+    return make_domain(to_sparse(input), spec, max_memory_bytes);
+}
+
+WarpDomain make_domain(SparseVoxmap input, const LatticeSpec& spec, std::uint64_t max_memory_bytes) {
+    check_spec(spec);
+    if (input.empty()) throw InvalidInput("warp: the voxmap is empty");
+    const double h = input.voxel_size();
     WarpDomain d;
-    d.target_origin = input.origin;
+    d.target_origin = input.origin();
     d.target_voxel_size = h;
     std::array<std::int64_t, 3> dims{};
     if (spec.placement == Placement::uniform) {
         std::array<std::int64_t, 3> offset{};
         for (std::size_t a = 0; a < 3; ++a) {
             const std::int64_t regions = spec.size[a] - 3;
-            const std::int64_t pad = std::int64_t(std::ceil(spec.padding * double(input.dims[a])));
-            const std::int64_t wanted = input.dims[a] + 2 * pad;
+            const std::int64_t pad = std::int64_t(std::ceil(spec.padding * double(input.dims()[a])));
+            const std::int64_t wanted = input.dims()[a] + 2 * pad;
             d.granularity[a] = int((wanted + regions - 1) / regions);
             dims[a] = std::int64_t(d.granularity[a]) * regions;
-            offset[a] = (dims[a] - input.dims[a]) / 2;
+            offset[a] = (dims[a] - input.dims()[a]) / 2;
         }
-        const Eigen::Vector3d origin = input.origin - h * Eigen::Vector3d(double(offset[0]), double(offset[1]), double(offset[2]));
+        const Eigen::Vector3d origin = input.origin() - h * Eigen::Vector3d(double(offset[0]), double(offset[1]), double(offset[2]));
         d.voxmap = std::move(input); // last use of input
         d.offset = offset;
         d.dims = dims;
@@ -55,24 +61,38 @@ WarpDomain make_domain(Voxmap input, const LatticeSpec& spec, std::uint64_t max_
     // resolution (the paper's DSIZE = 2 ISIZE), so the capture's resampling loses little.
     for (std::size_t a = 0; a < 3; ++a) {
         const std::int64_t regions = spec.size[a] - 3;
-        d.granularity[a] = int(std::max<std::int64_t>(1, (2 * input.dims[a] + regions - 1) / regions));
+        d.granularity[a] = int(std::max<std::int64_t>(1, (2 * input.dims()[a] + regions - 1) / regions));
         dims[a] = std::int64_t(d.granularity[a]) * regions;
     }
-    require_memory(voxmap_bytes(dims) + voxmap_bytes(input.dims), max_memory_bytes,
+    // The capture is block-sparse like its input, but where its blocks are stored depends on the map: budget
+    // for the dense worst case.
+    require_memory(voxmap_bytes(dims) + input.bytes(), max_memory_bytes,
                    "captured warp domain of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
-    const Eigen::Vector3d lo = input.origin, hi = input.world(double(input.dims[0] - 1), double(input.dims[1] - 1), double(input.dims[2] - 1));
+    const auto& n = input.dims();
+    const Eigen::Vector3d lo = input.origin(), hi = input.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
     d.lattice = Lattice::clamped(spec.size, lo, hi);
     const Eigen::Vector3d spacing = (hi - lo).cwiseQuotient(Eigen::Vector3d(double(dims[0]), double(dims[1]), double(dims[2])));
-    d.voxmap = Voxmap(dims, lo, spacing.maxCoeff());
+    d.voxmap = SparseVoxmap(dims, lo, spacing.maxCoeff());
     d.dims = dims;
-    // Capture: domain[e] = source(B(e / G)), trilinear in the source.
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, dims[2]), [&](const auto& r) {
-        for (std::int64_t k = r.begin(); k != r.end(); ++k)
-            for (std::int64_t j = 0; j < dims[1]; ++j)
-                for (std::int64_t i = 0; i < dims[0]; ++i) {
-                    const Eigen::Vector3d stu(double(i) / d.granularity[0], double(j) / d.granularity[1], double(k) / d.granularity[2]);
-                    d.voxmap.at(i, j, k) = input.sample(input.index_of(d.lattice.evaluate(stu)));
-                }
+    // Capture: domain[e] = source(B(e / G)), trilinear in the source, block by block.
+    constexpr std::int64_t S = SparseVoxmap::kSide;
+    const auto& bd = d.voxmap.block_dims();
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, d.voxmap.block_count()), [&](const auto& r) {
+        float values[SparseVoxmap::kBlockVoxels];
+        for (std::int64_t b = r.begin(); b != r.end(); ++b) {
+            const std::int64_t i0 = S * (b % bd[0]), j0 = S * ((b / bd[0]) % bd[1]), k0 = S * (b / (bd[0] * bd[1]));
+            for (std::int64_t z = 0; z < S; ++z)
+                for (std::int64_t y = 0; y < S; ++y)
+                    for (std::int64_t x = 0; x < S; ++x) {
+                        if (i0 + x >= dims[0] || j0 + y >= dims[1] || k0 + z >= dims[2]) { // past the domain: stored as 0
+                            values[x + S * (y + S * z)] = 0.0f;
+                            continue;
+                        }
+                        const Eigen::Vector3d stu(double(i0 + x) / d.granularity[0], double(j0 + y) / d.granularity[1], double(k0 + z) / d.granularity[2]);
+                        values[x + S * (y + S * z)] = input.sample(input.index_of(d.lattice.evaluate(stu)));
+                    }
+            d.voxmap.set_block(b, values);
+        }
     });
     return d;
 }

@@ -230,10 +230,18 @@ public:
                     qy[i] = combine(by.slope, &zv[0][i], 4);
                     qz[i] = combine(by.value, &zs[0][i], 4);
                 }
-                // The voxmap row under this domain row (none in the zero padding).
-                const Voxmap& vm = domain_.voxmap;
+                // The voxmap blocks under this domain row (none in the zero padding).
+                const SparseVoxmap& vm = domain_.voxmap;
                 const std::int64_t vy = f - domain_.offset[1], vz = g - domain_.offset[2];
-                const float* densities = vy >= 0 && vz >= 0 && vy < vm.dims[1] && vz < vm.dims[2] ? &vm.density[std::size_t(vm.index(0, vy, vz))] : nullptr;
+                const bool inside_row = vy >= 0 && vz >= 0 && vy < vm.dims()[1] && vz < vm.dims()[2];
+                const std::int64_t first_block = inside_row ? vm.block_index(0, vy >> 3, vz >> 3) : 0;
+                const std::int64_t in_block = SparseVoxmap::kSide * ((vy & 7) + SparseVoxmap::kSide * (vz & 7));
+                auto density_at = [&](std::int64_t vx) {
+                    if (!inside_row || vx < 0 || vx >= vm.dims()[0]) return 0.0f;
+                    const std::int64_t b = first_block + (vx >> 3);
+                    const float* values = vm.block_values(b);
+                    return values ? values[in_block + (vx & 7)] : vm.block_uniform(b);
+                };
                 for (auto r = run; r != runs_end; ++r) {
                     const std::int64_t first = std::max<std::int64_t>(e0, (*r)[0] + domain_.offset[0] - kReach);
                     const std::int64_t last = std::min<std::int64_t>(e0 + gx - 1, (*r)[1] + domain_.offset[0] - kReach);
@@ -242,7 +250,7 @@ public:
                         const Eigen::Vector3d centre = combine(bx.value, q);
                         const VoxelImage image = voxel_image(centre, combine(bx.slope, q), combine(bx.value, qy), combine(bx.value, qz));
                         const std::int64_t vx = e - domain_.offset[0];
-                        visit(centre, image.lo, image.hi, densities && vx >= 0 && vx < vm.dims[0] ? densities[vx] : 0.0f, image.mass);
+                        visit(centre, image.lo, image.hi, density_at(vx), image.mass);
                     }
                 }
             }
@@ -386,47 +394,60 @@ private:
     /// The mixed voxels of voxmap slice vz, dilated by kReach along x and y, into `slab` (a near-grid z-slab,
     /// nx x ny bytes). A voxel is mixed when fractional, or pure with a face neighbour of the other pure value
     /// (a sharp step; 0 outside the voxmap). A pure voxel next to a fractional one is not: it is on its own side.
-    void mixed_slab(std::int64_t vz, std::vector<std::uint8_t>& slab, std::vector<std::uint8_t>& line, std::vector<float>& here) const {
+    /// Rows of the voxmap as mixed_slab reads them: row (j, vz) with one 0 either side (here[0], here[n + 1]),
+    /// its neighbours along y (the slice's previous and next rows, kept as j advances) and along z.
+    struct RowWindow {
+        std::vector<float> previous, here, next, below, above;
+        bool any_previous = false, any_here = false, any_next = false;
+        explicit RowWindow(std::int64_t nx)
+            : previous(std::size_t(nx) + 2, 0.0f), here(std::size_t(nx) + 2, 0.0f), next(std::size_t(nx) + 2, 0.0f), below(std::size_t(nx)),
+              above(std::size_t(nx)) {}
+    };
+
+    /// The mixed voxels of voxmap slice vz, dilated by kReach along x and y, into `slab` (a near-grid z-slab,
+    /// nx x ny bytes). A voxel is mixed when fractional, or pure with a face neighbour of the other pure value
+    /// (a sharp step; 0 outside the voxmap). A pure voxel next to a fractional one is not: it is on its own side.
+    void mixed_slab(std::int64_t vz, std::vector<std::uint8_t>& slab, std::vector<std::uint8_t>& line, RowWindow& w) const {
         const auto& dm = domain_.voxmap;
-        const std::int64_t nx = near_dims_[0];
+        const std::int64_t nx = near_dims_[0], n = dm.dims()[0];
         std::fill(slab.begin(), slab.end(), std::uint8_t(0));
-        if (vz < 0 || vz >= dm.dims[2]) return;
-        const std::vector<float> zeros(std::size_t(dm.dims[0]), 0.0f);
-        auto row = [&](std::int64_t j, std::int64_t k) -> const float* {
-            if (j < 0 || k < 0 || j >= dm.dims[1] || k >= dm.dims[2]) return zeros.data();
-            return &dm.density[std::size_t(dm.index(0, j, k))];
-        };
+        if (vz < 0 || vz >= dm.dims()[2]) return;
         std::vector<std::uint8_t> mixed(static_cast<std::size_t>(nx + 2 * kReach), 0); // near-grid row, kReach more zeros each side
-        for (std::int64_t j = 0; j < dm.dims[1]; ++j) {
-            const float* c = row(j, vz);
-            const float *s = row(j - 1, vz), *n = row(j + 1, vz), *d = row(j, vz - 1), *u = row(j, vz + 1);
-            // Empty space first: a row that is all +0 with all-zero neighbour rows holds no mixed voxel (an OR
-            // of bit patterns, much cheaper than the comparisons below).
-            std::uint32_t bits = 0;
-            for (const float* r : {c, s, n, d, u})
-                for (std::int64_t i = 0; i < dm.dims[0]; ++i) bits |= std::bit_cast<std::uint32_t>(r[i]);
-            if (bits == 0) continue;
-            std::copy(c, c + dm.dims[0], here.begin() + 1); // here[0] and here[n + 1] stay 0
-            std::uint8_t* m = mixed.data() + 2 * kReach;
-            bool any = false;
-            for (std::int64_t i = 0; i < dm.dims[0]; ++i) {
-                const float v = here[std::size_t(i + 1)];
-                const float other = 1.0f - v; // for a pure voxel: the other side's value
-                m[i] = (v != 0.0f && v != 1.0f) || here[std::size_t(i)] == other || here[std::size_t(i + 2)] == other || s[i] == other ||
-                       n[i] == other || d[i] == other || u[i] == other;
-                any |= m[i] != 0;
+        std::fill(w.previous.begin(), w.previous.end(), 0.0f);
+        w.any_previous = false;
+        w.any_here = dm.read_row(0, vz, w.here.data() + 1);
+        for (std::int64_t j = 0; j < dm.dims()[1]; ++j) {
+            w.any_next = dm.read_row(j + 1, vz, w.next.data() + 1);
+            // Blocks that are uniformly zero answer without a comparison: empty space costs a few block lookups.
+            const bool any_below = dm.read_row(j, vz - 1, w.below.data()), any_above = dm.read_row(j, vz + 1, w.above.data());
+            if (w.any_previous || w.any_here || w.any_next || any_below || any_above) {
+                const float *here = w.here.data(), *s = w.previous.data() + 1, *nb = w.next.data() + 1, *d = w.below.data(), *u = w.above.data();
+                std::uint8_t* m = mixed.data() + 2 * kReach;
+                bool any = false;
+                for (std::int64_t i = 0; i < n; ++i) {
+                    const float v = here[i + 1];
+                    const float other = 1.0f - v; // for a pure voxel: the other side's value
+                    m[i] = (v != 0.0f && v != 1.0f) || here[i] == other || here[i + 2] == other || s[i] == other || nb[i] == other || d[i] == other ||
+                           u[i] == other;
+                    any |= m[i] != 0;
+                }
+                if (any) {
+                    // Along x into `line`, then OR-ed into the 2 kReach + 1 slab rows it reaches along y.
+                    std::fill(line.begin(), line.end(), std::uint8_t(0));
+                    for (std::int64_t dx = -kReach; dx <= kReach; ++dx) or_into(line.data(), mixed.data() + kReach + dx, nx);
+                    for (std::int64_t dy = -kReach; dy <= kReach; ++dy) or_into(&slab[std::size_t(nx * (j + kReach + dy))], line.data(), nx);
+                }
             }
-            if (!any) continue;
-            // Along x into `line`, then OR-ed into the 2 kReach + 1 slab rows it reaches along y.
-            std::fill(line.begin(), line.end(), std::uint8_t(0));
-            for (std::int64_t dx = -kReach; dx <= kReach; ++dx) or_into(line.data(), mixed.data() + kReach + dx, nx);
-            for (std::int64_t dy = -kReach; dy <= kReach; ++dy) or_into(&slab[std::size_t(nx * (j + kReach + dy))], line.data(), nx);
+            std::swap(w.previous, w.here);
+            std::swap(w.here, w.next);
+            w.any_previous = w.any_here;
+            w.any_here = w.any_next;
         }
     }
 
     void find_band() {
         const auto& dm = domain_.voxmap;
-        for (std::size_t a = 0; a < 3; ++a) near_dims_[a] = dm.dims[a] + 2 * kReach;
+        for (std::size_t a = 0; a < 3; ++a) near_dims_[a] = dm.dims()[a] + 2 * kReach;
         const std::int64_t nx = near_dims_[0], ny = near_dims_[1], nz = near_dims_[2];
         // Streamed over z in chunks of slabs, never as a whole mask: each chunk keeps a ring of the
         // 2 kReach + 1 xy-dilated slabs around its current one, ORs them (the z dilation) and keeps the runs.
@@ -438,7 +459,7 @@ private:
             const std::size_t slab_bytes = std::size_t(nx * ny);
             std::vector<std::vector<std::uint8_t>> ring(2 * kReach + 1, std::vector<std::uint8_t>(slab_bytes));
             std::vector<std::uint8_t> line(static_cast<std::size_t>(nx)), band(slab_bytes);
-            std::vector<float> here(std::size_t(dm.dims[0]) + 2, 0.0f);
+            RowWindow here(dm.dims()[0]);
             for (std::int64_t c = r.begin(); c != r.end(); ++c) {
                 const std::int64_t k0 = c * kChunk, k1 = std::min(nz, k0 + kChunk);
                 // Near slab k is voxmap slice k - kReach; ring slot (k mod 2R+1) holds near slab k.
@@ -529,8 +550,8 @@ struct Warp::State {
     std::vector<Box> boxes; // per region, what its current splat touches
     BlockAccumulator acc;
     Box target; // the result's bounds, target index space
-    Voxmap result;
-    DensityArray* recycle = nullptr; // the consumed domain's densities, reusable for the first full() result
+    SparseVoxmap result;
+    WarpDomain* consumed = nullptr; // a one-shot warp's domain, emptied once splatted
 
     std::vector<std::size_t> active_regions() const {
         std::vector<std::size_t> out;
@@ -595,29 +616,50 @@ struct Warp::State {
     }
 
     /// Resolve the target rows (whole x rows: an untouched voxel's side is carried along its row) that cross
-    /// `box` (target index space) into the result voxmap.
+    /// `box` (target index space) into the result, a row of result blocks at a time (the 8 x 8 rows they hold,
+    /// resolved into a buffer, then stored block by block).
     void resolve_rows(const Box& box) {
-        const std::int64_t z0 = std::max(box.lo[2], target.lo[2]), z1 = std::min(box.hi[2], target.hi[2]);
-        const std::int64_t y0 = std::max(box.lo[1], target.lo[1]), y1 = std::min(box.hi[1], target.hi[1]);
-        tbb::parallel_for(tbb::blocked_range<std::int64_t>(z0, z1 + 1), [&](const auto& range) {
-            for (std::int64_t z = range.begin(); z != range.end(); ++z)
-                for (std::int64_t y = y0; y <= y1; ++y) {
-                    float* out = &result.density[std::size_t(result.index(0, y - target.lo[1], z - target.lo[2]))] - target.lo[0];
-                    const std::int64_t ay = y - acc.box.lo[1], az = z - acc.box.lo[2];
+        constexpr std::int64_t S = SparseVoxmap::kSide;
+        const auto& dims = result.dims();
+        const std::int64_t nx = dims[0], padded = result.block_dims()[0] * S;
+        const std::int64_t bz0 = (std::max(box.lo[2], target.lo[2]) - target.lo[2]) / S, bz1 = (std::min(box.hi[2], target.hi[2]) - target.lo[2]) / S;
+        const std::int64_t by0 = (std::max(box.lo[1], target.lo[1]) - target.lo[1]) / S, by1 = (std::min(box.hi[1], target.hi[1]) - target.lo[1]) / S;
+        if (bz1 < bz0 || by1 < by0) return;
+        const std::int64_t rows_y = by1 - by0 + 1;
+        tbb::enumerable_thread_specific<std::vector<float>> buffers([&] { return std::vector<float>(std::size_t(padded * S * S)); });
+        tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, (bz1 - bz0 + 1) * rows_y), [&](const auto& range) {
+            std::vector<float>& buffer = buffers.local();
+            float block[SparseVoxmap::kBlockVoxels];
+            for (std::int64_t q = range.begin(); q != range.end(); ++q) {
+                const std::int64_t by = by0 + q % rows_y, bz = bz0 + q / rows_y;
+                for (std::int64_t r = 0; r < S * S; ++r) {
+                    const std::int64_t y = S * by + r % S, z = S * bz + r / S; // result index
+                    float* out = &buffer[std::size_t(r * padded)];
+                    std::fill(out + nx, out + padded, 0.0f);
+                    if (y >= dims[1] || z >= dims[2]) {
+                        std::fill(out, out + nx, 0.0f);
+                        continue;
+                    }
+                    const std::int64_t ay = y + target.lo[1] - acc.box.lo[1], az = z + target.lo[2] - acc.box.lo[2];
                     bool inside = false;
-                    for (std::int64_t x = target.lo[0]; x <= target.hi[0];) { // one accumulator block at a time
-                        const std::int64_t ax = x - acc.box.lo[0];
-                        const std::int64_t end = std::min(target.hi[0], x + (BlockAccumulator::kSide - 1 - (ax & 7)));
-                        const Cell* block = acc.find(ax >> 3, ay >> 3, az >> 3);
-                        if (!block) {
+                    for (std::int64_t x = 0; x < nx;) { // one accumulator block at a time
+                        const std::int64_t ax = x + target.lo[0] - acc.box.lo[0];
+                        const std::int64_t end = std::min(nx - 1, x + (BlockAccumulator::kSide - 1 - (ax & 7)));
+                        const Cell* cells = acc.find(ax >> 3, ay >> 3, az >> 3);
+                        if (!cells) {
                             std::fill(out + x, out + end + 1, inside ? 1.0f : 0.0f);
                         } else {
-                            const Cell* cell = block + BlockAccumulator::offset(ax, ay, az);
-                            for (std::int64_t q = x; q <= end; ++q, ++cell) out[q] = resolve_density(cell->weight, cell->value, std::int32_t(kFixedOne), inside);
+                            const Cell* cell = cells + BlockAccumulator::offset(ax, ay, az);
+                            for (std::int64_t p = x; p <= end; ++p, ++cell) out[p] = resolve_density(cell->weight, cell->value, std::int32_t(kFixedOne), inside);
                         }
                         x = end + 1;
                     }
                 }
+                for (std::int64_t bx = 0; bx < result.block_dims()[0]; ++bx) {
+                    for (std::int64_t r = 0; r < S * S; ++r) std::copy_n(&buffer[std::size_t(r * padded + S * bx)], S, block + S * r);
+                    result.set_block(result.block_index(bx, by, bz), block);
+                }
+            }
         });
     }
 
@@ -631,24 +673,24 @@ struct Warp::State {
         for (auto r : regions) bound.include(boxes[r]);
         if (bound.empty()) bound.lo = bound.hi = Index3{0, 0, 0}; // no density at all
         for (std::size_t i = 0; i < 3; ++i) bound.lo[i] -= 2, bound.hi[i] += 2;
+        // What grows with the target's extent rather than its surface: the accumulator's and the result's block
+        // tables (a map that stretches space far could ask for more than there is).
+        std::uint64_t blocks = 1;
+        for (std::size_t i = 0; i < 3; ++i) blocks *= std::uint64_t((bound.hi[i] - bound.lo[i]) / BlockAccumulator::kSide + 1);
+        require_memory(blocks * (sizeof(std::atomic<Cell*>) + sizeof(float) + sizeof(void*)), 0,
+                       "warp target of " + std::to_string(bound.hi[0] - bound.lo[0] + 1) + "x" + std::to_string(bound.hi[1] - bound.lo[1] + 1) + "x" +
+                           std::to_string(bound.hi[2] - bound.lo[2] + 1) + " voxels");
         acc.reset(bound);
         if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
+        if (consumed) consumed->voxmap = SparseVoxmap(); // the splat was its last use: free it before the result grows
         target = Box();
         for (auto r : regions) target.include(boxes[r]);
         if (target.empty()) target.lo = target.hi = Index3{0, 0, 0}; // a one-voxel empty target at the domain's origin
         for (std::size_t i = 0; i < 3; ++i) target.lo[i] -= 2, target.hi[i] += 2;
         Index3 dims;
         for (std::size_t i = 0; i < 3; ++i) dims[i] = target.hi[i] - target.lo[i] + 1;
-        const std::uint64_t voxels = std::uint64_t(dims[0]) * std::uint64_t(dims[1]) * std::uint64_t(dims[2]);
-        require_memory(voxels * sizeof(float), 0, "warp target of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " voxels");
-        result = Voxmap();
-        result.dims = dims;
-        result.origin = domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(target.lo[0]), double(target.lo[1]), double(target.lo[2]));
-        result.voxel_size = domain.target_voxel_size;
-        // The domain's densities are done with: a consuming warp() hands their (already faulted-in) memory over.
-        if (recycle && recycle->capacity() >= voxels) result.density = std::move(*recycle);
-        recycle = nullptr;
-        result.density.resize(std::size_t(voxels)); // uninitialised: resolve_rows writes every voxel
+        result = SparseVoxmap(dims, domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(target.lo[0]), double(target.lo[1]), double(target.lo[2])),
+                              domain.target_voxel_size);
         resolve_rows(target);
     }
 };
@@ -656,10 +698,10 @@ struct Warp::State {
 Warp::Warp(WarpDomain domain, const Lattice& lattice, const WarpOptions& options)
     : Warp(std::make_shared<const WarpDomain>(std::move(domain)), lattice, options, nullptr) {}
 
-Warp::Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options, DensityArray* recycle)
+Warp::Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options, WarpDomain* consumed)
     : state_(std::make_unique<State>(std::move(domain))) {
     auto& s = *state_;
-    s.recycle = recycle;
+    s.consumed = consumed;
     if (lattice.size() != s.domain.lattice.size()) throw InvalidInput("warp: the lattice's size differs from the domain's");
     s.lattice = lattice;
     s.options = options;
@@ -675,7 +717,7 @@ Warp& Warp::operator=(Warp&&) noexcept = default;
 
 const Lattice& Warp::lattice() const { return state_->lattice; }
 const WarpDomain& Warp::domain() const { return state_->domain; }
-Voxmap Warp::target() const { return state_->result; }
+const SparseVoxmap& Warp::target() const { return state_->result; }
 
 void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& position) {
     auto& s = *state_;
@@ -716,15 +758,15 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
     if (!touched.empty()) s.resolve_rows(touched);
 }
 
-Voxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options) {
+SparseVoxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options) {
     // Borrow the domain (no copy of its voxmap) for the lifetime of this call.
     Warp w(std::shared_ptr<const WarpDomain>(&domain, [](const WarpDomain*) {}), lattice, options, nullptr);
     return std::move(w.state_->result);
 }
 
-Voxmap warp(WarpDomain&& domain, const Lattice& lattice, const WarpOptions& options) {
-    Warp w(std::shared_ptr<const WarpDomain>(&domain, [](const WarpDomain*) {}), lattice, options, &domain.voxmap.density);
-    domain.voxmap.density = {};
+SparseVoxmap warp(WarpDomain&& domain, const Lattice& lattice, const WarpOptions& options) {
+    Warp w(std::shared_ptr<const WarpDomain>(&domain, [](const WarpDomain*) {}), lattice, options, &domain);
+    domain.voxmap = SparseVoxmap();
     return std::move(w.state_->result);
 }
 

@@ -8,6 +8,7 @@
 /// "level set") is converted to density with a one-voxel ramp on each side of its zero crossing.
 #pragma once
 
+#include <voxwarp/sparse_voxmap.h>
 #include <voxwarp/voxmap.h>
 
 #include <string>
@@ -16,6 +17,7 @@ namespace voxwarp {
 
 /// Write `voxmap` to `path` (temp file + rename). @throw IOError on failure.
 void write_vdb(const Voxmap& voxmap, const std::string& path);
+void write_vdb(const SparseVoxmap& voxmap, const std::string& path);
 
 /// Read the first float grid of a .vdb file (or the grid named `grid_name` when given) as a voxmap
 /// covering the grid's active bounding box (plus the stored dims when written by voxwarp).

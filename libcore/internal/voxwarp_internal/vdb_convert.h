@@ -3,6 +3,7 @@
 /// Not installed, not public: it pulls in OpenVDB, which public headers keep out.
 #pragma once
 
+#include <voxwarp/sparse_voxmap.h>
 #include <voxwarp/voxmap.h>
 
 #include <openvdb/openvdb.h>
@@ -13,9 +14,11 @@ namespace voxwarp::vdb_internal {
 
 /// Transform taking grid index (i, j, k) to the world centre of voxmap voxel (i, j, k).
 openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap);
+openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, double voxel_size);
 
 /// Sparse copy of a voxmap's density (background 0; constant blocks become tiles). Parallel.
 openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap);
+openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap);
 
 /// Dense voxmap of a float grid's active bounding box. Level sets (GRID_LEVEL_SET) are converted to
 /// density with a ramp one voxel wide on each side of the zero crossing; other grids are clamped to [0, 1].

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <voxwarp/progress.h>
+#include <voxwarp/sparse_voxmap.h>
 #include <voxwarp/triangle_mesh.h>
 #include <voxwarp/voxmap.h>
 
@@ -23,5 +24,7 @@ struct ExtractOptions {
 /// Extract the isosurface. Parallel (oneTBB, inside OpenVDB).
 /// @throw InvalidInput for an isovalue outside (0, 1) or adaptivity outside [0, 1]; Cancelled.
 TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options = {});
+/// The same from a block-sparse voxmap: its blocks become the grid's leaves and tiles directly.
+TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options = {});
 
 } // namespace voxwarp

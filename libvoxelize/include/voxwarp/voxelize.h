@@ -15,6 +15,7 @@
 #pragma once
 
 #include <voxwarp/progress.h>
+#include <voxwarp/sparse_voxmap.h>
 #include <voxwarp/triangle_mesh.h>
 #include <voxwarp/voxmap.h>
 
@@ -44,17 +45,20 @@ struct VoxelizeOptions {
 ///        non-positive voxel size, or a grid with more than 2^31 voxels along an axis.
 Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
 
-/// Estimated peak bytes voxelize needs for this mesh and these options.
-std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
+/// Estimated peak bytes voxelize (or, with `sparse`, voxelize_sparse) needs for this mesh and these options.
+std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options = {}, bool sparse = false);
 
 /// Sign method `automatic` resolves to for this mesh.
 SignMethod resolve_sign_method(const TriangleMesh& mesh);
 
 /// Voxelize a mesh (world units) into an antialiased voxmap whose voxel (0,0,0) centre sits padding_voxels
-/// voxels below the mesh's minimum corner. Parallel (oneTBB). The densities' capacity holds a quarter more
-/// voxels (address space only, never touched), which a consuming warp(WarpDomain&&) reuses for its target.
+/// voxels below the mesh's minimum corner. Parallel (oneTBB).
 /// @throw InvalidInput (see voxelize_frame), ResourceLimit when the estimate exceeds the memory limit,
 ///        Cancelled when the progress callback returns false.
 Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
+
+/// The same voxmap, block-sparse: on the flood-fill path OpenVDB's level-set leaves become the blocks directly,
+/// so memory follows the surface's area (the winding-number path still builds the dense volume first).
+SparseVoxmap voxelize_sparse(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
 
 } // namespace voxwarp

@@ -24,6 +24,7 @@
 
 #include <voxwarp/lattice.h>
 #include <voxwarp/progress.h>
+#include <voxwarp/sparse_voxmap.h>
 #include <voxwarp/voxmap.h>
 
 #include <array>
@@ -43,7 +44,7 @@ struct LatticeSpec {
 /// (e/Gx, f/Gy, g/Gz) and holds voxmap voxel (e, f, g) - offset, or 0 outside the voxmap: the zero padding the
 /// lattice needs around the data is never stored.
 struct WarpDomain {
-    Voxmap voxmap;                     ///< the data (uniform: the input itself; clamped: its capture, offset 0)
+    SparseVoxmap voxmap;               ///< the data (uniform: the input itself; clamped: its capture, offset 0)
     std::array<std::int64_t, 3> offset{}; ///< domain index of voxmap voxel (0, 0, 0)
     std::array<std::int64_t, 3> dims{};   ///< domain voxels per axis: G * (n - 3)
     Lattice lattice;                   ///< the undeformed lattice
@@ -52,19 +53,18 @@ struct WarpDomain {
     double target_voxel_size = 1;      ///< target voxel size, world units (the input's)
 
     /// Density of domain voxel (e, f, g); 0 in the padding.
-    float density(std::int64_t e, std::int64_t f, std::int64_t g) const {
-        e -= offset[0], f -= offset[1], g -= offset[2];
-        if (e < 0 || f < 0 || g < 0 || e >= voxmap.dims[0] || f >= voxmap.dims[1] || g >= voxmap.dims[2]) return 0.0f;
-        return voxmap.at(e, f, g);
-    }
+    float density(std::int64_t e, std::int64_t f, std::int64_t g) const { return voxmap.at(e - offset[0], f - offset[1], g - offset[2]); }
 };
 
 /// Build the domain for a voxmap. Uniform placement: a grid of G * (n - 3) voxels per axis aligned with the
-/// input's voxels, the input centred in it (no copy, no resampling: the undeformed warp is the identity). Clamped placement: the input is *captured* (pulled back through the undeformed clamped map,
-/// paper section 5) into a domain of about twice the input's resolution per axis.
+/// input's voxels, the input centred in it (no copy, no resampling: the undeformed warp is the identity).
+/// Clamped placement: the input is *captured* (pulled back through the undeformed clamped map, paper section 5)
+/// into a domain of about twice the input's resolution per axis.
 /// @throw InvalidInput for an empty voxmap or a bad spec; ResourceLimit when the domain would exceed max_memory_bytes
 ///        (0 = 90 % of available memory).
-WarpDomain make_domain(Voxmap input, const LatticeSpec& spec, std::uint64_t max_memory_bytes = 0);
+WarpDomain make_domain(SparseVoxmap input, const LatticeSpec& spec, std::uint64_t max_memory_bytes = 0);
+/// The same for a dense voxmap (stored block-sparse in the domain).
+WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64_t max_memory_bytes = 0);
 
 struct WarpOptions {
     bool preview = false; ///< the paper's "map and round off": each voxel centre lands in one target voxel (fast, aliased)
@@ -72,13 +72,13 @@ struct WarpOptions {
 };
 
 /// Full warp of a domain through `lattice` (the domain's lattice, with moved control points) into a target voxmap
-/// covering the warped domain. Parallel (oneTBB), deterministic. @throw Cancelled, ResourceLimit.
-Voxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options = {});
+/// covering the warped domain (block-sparse; to_dense() for a dense copy). Parallel (oneTBB), deterministic.
+/// @throw Cancelled, ResourceLimit.
+SparseVoxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options = {});
 
-/// The same, consuming the domain: its voxmap's memory (already faulted in, and often with room reserved to
-/// grow, see voxelize()) becomes the target's when large enough, which spares the page faults of a fresh
-/// target (a third of a 512^3 warp's time). The domain's voxmap is empty afterwards.
-Voxmap warp(WarpDomain&& domain, const Lattice& lattice, const WarpOptions& options = {});
+/// The same, consuming the domain: its voxmap is freed as soon as it has been splatted, before the target is
+/// built, so the two never take memory together. The domain's voxmap is empty afterwards.
+SparseVoxmap warp(WarpDomain&& domain, const Lattice& lattice, const WarpOptions& options = {});
 
 /// The same warp computed the slow, obvious way: the 64-term basis sum evaluated directly at every voxel, no
 /// tables, one thread. For tests and the BM_WarpNaive benchmark only.
@@ -102,12 +102,12 @@ public:
     const Lattice& lattice() const;
     const WarpDomain& domain() const;
     /// The target voxmap as it stands now.
-    Voxmap target() const;
+    const SparseVoxmap& target() const;
 
 private:
-    Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options, DensityArray* recycle);
-    friend Voxmap warp(const WarpDomain&, const Lattice&, const WarpOptions&);
-    friend Voxmap warp(WarpDomain&&, const Lattice&, const WarpOptions&);
+    Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, const WarpOptions& options, WarpDomain* consumed);
+    friend SparseVoxmap warp(const WarpDomain&, const Lattice&, const WarpOptions&);
+    friend SparseVoxmap warp(WarpDomain&&, const Lattice&, const WarpOptions&);
     struct State;
     std::unique_ptr<State> state_;
 };
