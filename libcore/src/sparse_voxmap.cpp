@@ -105,6 +105,14 @@ bool SparseVoxmap::read_row(std::int64_t j, std::int64_t k, float* out) const {
     return any;
 }
 
+bool SparseVoxmap::row_is_zero(std::int64_t j, std::int64_t k) const {
+    if (j < 0 || k < 0 || j >= dims_[1] || k >= dims_[2]) return true;
+    const std::size_t b0 = std::size_t(block_index(0, j >> 3, k >> 3));
+    for (std::size_t b = b0; b < b0 + std::size_t(block_dims_[0]); ++b)
+        if (stored_[b] || std::bit_cast<std::uint32_t>(uniform_[b]) != 0) return false;
+    return true;
+}
+
 float SparseVoxmap::sample(const Eigen::Vector3d& p) const {
     const double fx = std::floor(p.x()), fy = std::floor(p.y()), fz = std::floor(p.z());
     const std::int64_t i0 = std::int64_t(fx), j0 = std::int64_t(fy), k0 = std::int64_t(fz);

@@ -394,14 +394,30 @@ private:
     /// The mixed voxels of voxmap slice vz, dilated by kReach along x and y, into `slab` (a near-grid z-slab,
     /// nx x ny bytes). A voxel is mixed when fractional, or pure with a face neighbour of the other pure value
     /// (a sharp step; 0 outside the voxmap). A pure voxel next to a fractional one is not: it is on its own side.
-    /// Rows of the voxmap as mixed_slab reads them: row (j, vz) with one 0 either side (here[0], here[n + 1]),
-    /// its neighbours along y (the slice's previous and next rows, kept as j advances) and along z.
+    /// A voxmap row as mixed_slab reads it, `pad` zeros either side. A row whose blocks are all uniform zero is
+    /// not read: its buffer is zeroed once and remembered as such, so empty space costs a few block lookups.
+    struct RowBuffer {
+        std::vector<float> values;
+        std::int64_t pad = 0;
+        bool any = false;  // some value is nonzero
+        bool zero = true;  // values are all zero
+        RowBuffer(std::int64_t n, std::int64_t p) : values(std::size_t(n + 2 * p), 0.0f), pad(p) {}
+        void load(const SparseVoxmap& vm, std::int64_t j, std::int64_t k) {
+            if (vm.row_is_zero(j, k)) {
+                if (!zero) std::fill(values.begin(), values.end(), 0.0f);
+                zero = true;
+                any = false;
+                return;
+            }
+            any = vm.read_row(j, k, values.data() + pad);
+            zero = !any;
+        }
+        const float* data() const { return values.data() + pad; }
+    };
+    /// Row (j, vz), padded for its x neighbours, and its neighbours along y (kept as j advances) and z.
     struct RowWindow {
-        std::vector<float> previous, here, next, below, above;
-        bool any_previous = false, any_here = false, any_next = false;
-        explicit RowWindow(std::int64_t nx)
-            : previous(std::size_t(nx) + 2, 0.0f), here(std::size_t(nx) + 2, 0.0f), next(std::size_t(nx) + 2, 0.0f), below(std::size_t(nx)),
-              above(std::size_t(nx)) {}
+        RowBuffer previous, here, next, below, above;
+        explicit RowWindow(std::int64_t n) : previous(n, 1), here(n, 1), next(n, 1), below(n, 0), above(n, 0) {}
     };
 
     /// The mixed voxels of voxmap slice vz, dilated by kReach along x and y, into `slab` (a near-grid z-slab,
@@ -413,21 +429,20 @@ private:
         std::fill(slab.begin(), slab.end(), std::uint8_t(0));
         if (vz < 0 || vz >= dm.dims()[2]) return;
         std::vector<std::uint8_t> mixed(static_cast<std::size_t>(nx + 2 * kReach), 0); // near-grid row, kReach more zeros each side
-        std::fill(w.previous.begin(), w.previous.end(), 0.0f);
-        w.any_previous = false;
-        w.any_here = dm.read_row(0, vz, w.here.data() + 1);
+        w.previous.load(dm, -1, vz);
+        w.here.load(dm, 0, vz);
         for (std::int64_t j = 0; j < dm.dims()[1]; ++j) {
-            w.any_next = dm.read_row(j + 1, vz, w.next.data() + 1);
-            // Blocks that are uniformly zero answer without a comparison: empty space costs a few block lookups.
-            const bool any_below = dm.read_row(j, vz - 1, w.below.data()), any_above = dm.read_row(j, vz + 1, w.above.data());
-            if (w.any_previous || w.any_here || w.any_next || any_below || any_above) {
-                const float *here = w.here.data(), *s = w.previous.data() + 1, *nb = w.next.data() + 1, *d = w.below.data(), *u = w.above.data();
+            w.next.load(dm, j + 1, vz);
+            w.below.load(dm, j, vz - 1);
+            w.above.load(dm, j, vz + 1);
+            if (w.previous.any || w.here.any || w.next.any || w.below.any || w.above.any) {
+                const float *c = w.here.data(), *s = w.previous.data(), *nb = w.next.data(), *d = w.below.data(), *u = w.above.data();
                 std::uint8_t* m = mixed.data() + 2 * kReach;
                 bool any = false;
                 for (std::int64_t i = 0; i < n; ++i) {
-                    const float v = here[i + 1];
+                    const float v = c[i];
                     const float other = 1.0f - v; // for a pure voxel: the other side's value
-                    m[i] = (v != 0.0f && v != 1.0f) || here[i] == other || here[i + 2] == other || s[i] == other || nb[i] == other || d[i] == other ||
+                    m[i] = (v != 0.0f && v != 1.0f) || c[i - 1] == other || c[i + 1] == other || s[i] == other || nb[i] == other || d[i] == other ||
                            u[i] == other;
                     any |= m[i] != 0;
                 }
@@ -440,8 +455,6 @@ private:
             }
             std::swap(w.previous, w.here);
             std::swap(w.here, w.next);
-            w.any_previous = w.any_here;
-            w.any_here = w.any_next;
         }
     }
 

@@ -67,6 +67,8 @@ public:
     /// Copy row (j, k) (dims[0] values, 0 when the row lies outside) into `out`; returns whether any is nonzero
     /// (false at once for a row through uniform-zero blocks only, without comparing values).
     bool read_row(std::int64_t j, std::int64_t k, float* out) const;
+    /// Whether row (j, k) is all +0 by its blocks alone (each uniform +0), or lies outside; no value is read.
+    bool row_is_zero(std::int64_t j, std::int64_t k) const;
     /// Trilinear density at a continuous index-space position; 0 outside.
     float sample(const Eigen::Vector3d& index_pos) const;
 
