@@ -3,6 +3,7 @@
 #include <voxwarp/decimate.h>
 #include <voxwarp/errors.h>
 #include <voxwarp/foldover.h>
+#include <voxwarp/resources.h>
 
 #include <chrono>
 #include <cmath>
@@ -74,6 +75,8 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
     report.voxel_size = voxmap.voxel_size();
     report.dims = voxmap.dims();
     report.volume_before = enclosed_volume(voxmap);
+    // The warp's sums (8 bytes a voxel, in blocks over the band's image) take about three times the voxmap's own.
+    require_memory(3 * voxmap.bytes(), options.voxelize.max_memory_bytes, "warping a voxmap of " + std::to_string(voxmap.bytes() >> 20) + " MiB");
     const double h = voxmap.voxel_size();
     for (std::size_t e = 0; e < script.edits.size(); ++e) {
         const auto& constraints = script.edits[e].constraints;
@@ -111,6 +114,11 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     auto t = Clock::now();
     VoxelizeOptions vo = options.voxelize;
     vo.progress = options.progress;
+    // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
+    // voxel of surface area, measured on the bunny); the extracted mesh and its grid take less than that.
+    const Voxmap frame = voxelize_frame(mesh, vo);
+    require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)), vo.max_memory_bytes,
+                   "deforming at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
     SparseVoxmap voxmap = voxelize_sparse(mesh, vo);
     report.seconds_voxelize = seconds_since(t);
     voxmap = deform_voxmap(std::move(voxmap), script, options, report);

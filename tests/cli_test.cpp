@@ -86,6 +86,12 @@ TEST_F(Cli, ExitCodesForMissingFilesUsageAndResourceLimits) {
     EXPECT_EQ(big.code, 3);
     EXPECT_NE(big.err.find("needs about"), std::string::npos) << big.err;
     EXPECT_FALSE(fs::exists(file("x.vdb")));
+    // The deform estimate adds the warp's sums to the sparse voxmap: about 1.2 GiB at 1024 for the bunny.
+    const Outcome deform = run("deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -o " + file("x.obj") +
+                               " --resolution 1024 --max-memory 0.5");
+    EXPECT_EQ(deform.code, 3);
+    EXPECT_NE(deform.err.find("deforming at"), std::string::npos) << deform.err;
+    EXPECT_FALSE(fs::exists(file("x.obj")));
 }
 
 TEST_F(Cli, DeformWritesMeshAndReport) {

@@ -502,6 +502,16 @@ Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options) 
     return frame;
 }
 
+double surface_voxels(const TriangleMesh& mesh, const VoxelizeOptions& options) {
+    const double h = voxelize_frame(mesh, options).voxel_size;
+    double area = 0;
+    for (const auto& t : mesh.triangles)
+        area += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
+    for (const auto& q : mesh.quads)
+        area += 0.5 * (mesh.vertices[q[2]] - mesh.vertices[q[0]]).cross(mesh.vertices[q[3]] - mesh.vertices[q[1]]).norm();
+    return area / (h * h);
+}
+
 std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options, bool sparse) {
     const Voxmap frame = voxelize_frame(mesh, options);
     // The sparse narrow band (about a 7-voxel shell of the surface, ~16 bytes a voxel with tree overhead), the
@@ -509,11 +519,7 @@ std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeO
     // terms each), the mesh's own copies, and the result: dense, or blocks of 8^3 floats along the surface
     // (a flat surface meets about 3 blocks per 64 voxels of its area, each 2 KiB). The winding-number path
     // builds a dense volume first either way.
-    const double h = frame.voxel_size;
-    double area = 0;
-    for (const auto& t : mesh.triangles)
-        area += 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
-    const double surface = area / (h * h);
+    const double surface = surface_voxels(mesh, options);
     const double band = surface * ((2 * (options.ramp_voxels + 2)) * 16.0 + 1.5 * 2 * 24);
     const SignMethod method = options.sign == SignMethod::automatic ? resolve_sign_method(mesh) : options.sign;
     const bool dense = !sparse || method == SignMethod::winding_number;

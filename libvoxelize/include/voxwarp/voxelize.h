@@ -45,6 +45,10 @@ struct VoxelizeOptions {
 ///        non-positive voxel size, or a grid with more than 2^31 voxels along an axis.
 Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
 
+/// Area of the mesh's faces in voxels (units of h^2): what the memory of level sets, sparse voxmaps and warps
+/// grows with.
+double surface_voxels(const TriangleMesh& mesh, const VoxelizeOptions& options = {});
+
 /// Estimated peak bytes voxelize (or, with `sparse`, voxelize_sparse) needs for this mesh and these options.
 std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeOptions& options = {}, bool sparse = false);
 
