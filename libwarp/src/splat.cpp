@@ -391,9 +391,6 @@ private:
         for (std::int64_t i = 0; i < n; ++i) row[i] |= other[i];
     }
 
-    /// The mixed voxels of voxmap slice vz, dilated by kReach along x and y, into `slab` (a near-grid z-slab,
-    /// nx x ny bytes). A voxel is mixed when fractional, or pure with a face neighbour of the other pure value
-    /// (a sharp step; 0 outside the voxmap). A pure voxel next to a fractional one is not: it is on its own side.
     /// A voxmap row as mixed_slab reads it, `pad` zeros either side. A row whose blocks are all uniform zero is
     /// not read: its buffer is zeroed once and remembered as such, so empty space costs a few block lookups.
     struct RowBuffer {
@@ -472,15 +469,15 @@ private:
             const std::size_t slab_bytes = std::size_t(nx * ny);
             std::vector<std::vector<std::uint8_t>> ring(2 * kReach + 1, std::vector<std::uint8_t>(slab_bytes));
             std::vector<std::uint8_t> line(static_cast<std::size_t>(nx)), band(slab_bytes);
-            RowWindow here(dm.dims()[0]);
+            RowWindow window(dm.dims()[0]);
             for (std::int64_t c = r.begin(); c != r.end(); ++c) {
                 const std::int64_t k0 = c * kChunk, k1 = std::min(nz, k0 + kChunk);
                 // Near slab k is voxmap slice k - kReach; ring slot (k mod 2R+1) holds near slab k.
                 for (std::int64_t k = k0 - kReach; k < k0 + kReach; ++k)
-                    mixed_slab(k - kReach, ring[std::size_t((k + 2 * kReach + 1) % (2 * kReach + 1))], line, here);
+                    mixed_slab(k - kReach, ring[std::size_t((k + 2 * kReach + 1) % (2 * kReach + 1))], line, window);
                 auto& runs = chunk_runs[std::size_t(c)];
                 for (std::int64_t k = k0; k < k1; ++k) {
-                    mixed_slab(k, ring[std::size_t((k + kReach) % (2 * kReach + 1))], line, here); // near slab k + kReach
+                    mixed_slab(k, ring[std::size_t((k + kReach) % (2 * kReach + 1))], line, window); // near slab k + kReach
                     std::fill(band.begin(), band.end(), std::uint8_t(0));
                     for (const auto& slab : ring) or_into(band.data(), slab.data(), std::int64_t(slab_bytes));
                     for (std::int64_t j = 0; j < ny; ++j) {
