@@ -2,6 +2,8 @@
 #include <voxwarp/resources.h>
 #include <voxwarp/sparse_voxmap.h>
 
+#include "trilinear.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -114,17 +116,7 @@ bool SparseVoxmap::row_is_zero(std::int64_t j, std::int64_t k) const {
 }
 
 float SparseVoxmap::sample(const Eigen::Vector3d& p) const {
-    const double fx = std::floor(p.x()), fy = std::floor(p.y()), fz = std::floor(p.z());
-    const std::int64_t i0 = std::int64_t(fx), j0 = std::int64_t(fy), k0 = std::int64_t(fz);
-    const double tx = p.x() - fx, ty = p.y() - fy, tz = p.z() - fz;
-    double result = 0;
-    for (int dk = 0; dk < 2; ++dk)
-        for (int dj = 0; dj < 2; ++dj)
-            for (int di = 0; di < 2; ++di) {
-                const double w = (di ? tx : 1 - tx) * (dj ? ty : 1 - ty) * (dk ? tz : 1 - tz);
-                if (w != 0) result += w * at(i0 + di, j0 + dj, k0 + dk);
-            }
-    return float(result);
+    return core_internal::trilinear(p, [this](std::int64_t i, std::int64_t j, std::int64_t k) { return at(i, j, k); });
 }
 
 SparseVoxmap to_sparse(const Voxmap& voxmap) {

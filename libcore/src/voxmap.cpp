@@ -1,6 +1,8 @@
 #include <voxwarp/errors.h>
 #include <voxwarp/voxmap.h>
 
+#include "trilinear.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -46,21 +48,9 @@ Voxmap::Voxmap(std::array<std::int64_t, 3> d, const Eigen::Vector3d& o, double h
 }
 
 float Voxmap::sample(const Eigen::Vector3d& p) const {
-    const double fx = std::floor(p.x()), fy = std::floor(p.y()), fz = std::floor(p.z());
-    const std::int64_t i0 = std::int64_t(fx), j0 = std::int64_t(fy), k0 = std::int64_t(fz);
-    const double tx = p.x() - fx, ty = p.y() - fy, tz = p.z() - fz;
-    auto value = [&](std::int64_t i, std::int64_t j, std::int64_t k) -> double {
-        if (i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2]) return 0.0;
-        return at(i, j, k);
-    };
-    double result = 0;
-    for (int dk = 0; dk < 2; ++dk)
-        for (int dj = 0; dj < 2; ++dj)
-            for (int di = 0; di < 2; ++di) {
-                const double w = (di ? tx : 1 - tx) * (dj ? ty : 1 - ty) * (dk ? tz : 1 - tz);
-                if (w != 0) result += w * value(i0 + di, j0 + dj, k0 + dk);
-            }
-    return float(result);
+    return core_internal::trilinear(p, [this](std::int64_t i, std::int64_t j, std::int64_t k) {
+        return i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2] ? 0.0f : at(i, j, k);
+    });
 }
 
 double enclosed_volume(const Voxmap& voxmap) {
