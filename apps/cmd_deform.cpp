@@ -147,7 +147,7 @@ void add_warp(CLI::App& app, Global& global, Action& action) {
             a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
             a->options.progress = stderr_progress(global);
             const EditScript script = read_edit_file(a->edits);
-            SparseVoxmap voxmap = to_sparse(read_vdb(a->input));
+            SparseVoxmap voxmap = read_vdb_sparse(a->input);
             DeformReport report;
             voxmap = attributing_errors(*a, [&] { return deform_voxmap(std::move(voxmap), script, a->options, report); });
             write_vdb(voxmap, a->output);

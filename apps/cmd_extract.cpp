@@ -26,7 +26,7 @@ void add_extract(CLI::App& app, Global& global, Action& action) {
         action = [args, &global] {
             if (!is_mesh_path(args->output)) throw InvalidInput(args->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
             args->options.progress = stderr_progress(global);
-            const Voxmap voxmap = read_vdb(args->input, args->grid);
+            const SparseVoxmap voxmap = read_vdb_sparse(args->input, args->grid);
             const TriangleMesh mesh = extract(voxmap, args->options);
             if (mesh.face_count() == 0) throw InvalidInput(args->input + ": the volume has no surface at isovalue " + std::to_string(args->options.isovalue));
             write_mesh(mesh, args->output);

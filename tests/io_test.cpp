@@ -7,6 +7,12 @@
 
 #include <gtest/gtest.h>
 
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+
+#include <cmath>
+
 #include <filesystem>
 #include <fstream>
 
@@ -129,6 +135,55 @@ TEST(VdbIO, WriteThenReadIsLossless) {
     EXPECT_DOUBLE_EQ(back.voxel_size, voxmap.voxel_size);
     EXPECT_NEAR((back.origin - voxmap.origin).norm(), 0.0, 1e-12);
     EXPECT_EQ(back.density, voxmap.density);
+    // Block-sparse, the same voxels: a file voxwarp wrote starts at index 0, a multiple of 8.
+    const Voxmap sparse_back = to_dense(read_vdb_sparse(path));
+    ASSERT_EQ(sparse_back.dims, voxmap.dims);
+    EXPECT_NEAR((sparse_back.origin - voxmap.origin).norm(), 0.0, 1e-12);
+    EXPECT_EQ(sparse_back.density, voxmap.density);
+}
+
+void write_grid(const openvdb::FloatGrid::Ptr& grid, const std::string& path) {
+    openvdb::io::File file(path);
+    file.write({grid});
+    file.close();
+}
+
+TEST(VdbIO, SparseAndDenseReadsOfALevelSetAgree) {
+    // OpenVDB's own level set of a sphere, off the origin so its bounding box starts off a multiple of 8.
+    openvdb::initialize();
+    const float h = 0.1f;
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(1.0f, openvdb::Vec3f(0.33f, -0.71f, 0.52f), h);
+    TempDir dir;
+    write_grid(grid, dir.file("sphere.vdb"));
+    const Voxmap dense = read_vdb(dir.file("sphere.vdb"));
+    const SparseVoxmap sparse = read_vdb_sparse(dir.file("sphere.vdb"));
+    // The sparse origin lies on the grid's lattice, at most 7 voxels below the dense one.
+    const Eigen::Vector3d shift = (dense.origin - sparse.origin()) / h;
+    for (int a = 0; a < 3; ++a) {
+        EXPECT_NEAR(shift[a], std::round(shift[a]), 1e-4);
+        EXPECT_GE(std::round(shift[a]), 0);
+        EXPECT_LE(std::round(shift[a]), 7);
+    }
+    const std::int64_t sx = std::llround(shift.x()), sy = std::llround(shift.y()), sz = std::llround(shift.z());
+    for (std::int64_t k = 0; k < dense.dims[2]; ++k)
+        for (std::int64_t j = 0; j < dense.dims[1]; ++j)
+            for (std::int64_t i = 0; i < dense.dims[0]; ++i) ASSERT_EQ(sparse.at(i + sx, j + sy, k + sz), dense.at(i, j, k)) << i << " " << j << " " << k;
+    // Both hold the ball: 4/3 pi r^3 within a voxel's worth of its surface.
+    const double ball = 4.0 / 3.0 * M_PI;
+    EXPECT_NEAR(enclosed_volume(sparse), ball, 0.01 * ball);
+    EXPECT_NEAR(enclosed_volume(dense), enclosed_volume(sparse), 1e-9);
+}
+
+TEST(VdbIO, NonFiniteValuesAreRefusedByBothReaders) {
+    openvdb::initialize();
+    auto grid = openvdb::FloatGrid::create(0.0f);
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(0.5));
+    for (int i = 0; i < 20; ++i) grid->tree().setValue(openvdb::Coord(i, 3, -2), 0.7f);
+    grid->tree().setValue(openvdb::Coord(11, 3, -2), std::nanf(""));
+    TempDir dir;
+    write_grid(grid, dir.file("nan.vdb"));
+    EXPECT_THROW(read_vdb(dir.file("nan.vdb")), InvalidInput);
+    EXPECT_THROW(read_vdb_sparse(dir.file("nan.vdb")), InvalidInput);
 }
 
 TEST(VdbIO, RejectsFilesWithoutAFloatGrid) {

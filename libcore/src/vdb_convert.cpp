@@ -74,7 +74,17 @@ openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap) {
 
 openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap) { return to_density_grid(to_sparse(voxmap)); }
 
-Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source) {
+namespace {
+
+/// What a float grid becomes as a voxmap: its voxel size and the index box the voxmap covers (the active
+/// bounding box, a level set's one more voxel each side, and the stored dims of a file voxwarp wrote).
+struct GridFrame {
+    double h = 0;
+    openvdb::CoordBBox box;
+    bool level_set = false;
+};
+
+GridFrame grid_frame(const openvdb::FloatGrid& grid, const std::string& source) {
     const auto& xform = grid.transform();
     if (!xform.isLinear() || !xform.hasUniformScale())
         throw InvalidInput(source + ": grid '" + grid.getName() + "' has a non-uniform or non-linear transform; voxmaps need cubic voxels");
@@ -91,36 +101,89 @@ Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source
     }
     if (!(h > 0) || !std::isfinite(h)) throw InvalidInput(source + ": grid '" + grid.getName() + "' has voxel size " + std::to_string(h));
 
-    openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
-    if (box.empty()) throw InvalidInput(source + ": grid '" + grid.getName() + "' has no active voxels");
-    const bool level_set = grid.getGridClass() == openvdb::GRID_LEVEL_SET;
-    if (level_set) box.expand(1); // the ramp can reach one voxel past the band's last active voxel
+    GridFrame frame{h, grid.evalActiveVoxelBoundingBox(), grid.getGridClass() == openvdb::GRID_LEVEL_SET};
+    if (frame.box.empty()) throw InvalidInput(source + ": grid '" + grid.getName() + "' has no active voxels");
+    if (frame.level_set) frame.box.expand(1); // the ramp can reach one voxel past the band's last active voxel
     if (auto meta = grid.getMetadata<openvdb::Vec3IMetadata>("voxwarp_dims")) {
         const auto d = meta->value();
-        if (d[0] > 0 && d[1] > 0 && d[2] > 0) box.expand(openvdb::CoordBBox(openvdb::Coord(0, 0, 0), openvdb::Coord(d[0] - 1, d[1] - 1, d[2] - 1)));
+        if (d[0] > 0 && d[1] > 0 && d[2] > 0) frame.box.expand(openvdb::CoordBBox(openvdb::Coord(0, 0, 0), openvdb::Coord(d[0] - 1, d[1] - 1, d[2] - 1)));
     }
+    return frame;
+}
+
+/// Grid value -> density: a level set's signed distance through a one-voxel ramp, anything else clamped to [0, 1].
+/// Sets `non_finite` (and returns 0) for NaN or infinity.
+inline float to_density(float v, const GridFrame& frame, bool& non_finite) {
+    if (!std::isfinite(v)) {
+        non_finite = true;
+        return 0.0f;
+    }
+    if (frame.level_set) v = 0.5f - 0.5f * v / float(frame.h);
+    return v < 0 ? 0.0f : (v > 1 ? 1.0f : v);
+}
+
+[[noreturn]] void throw_non_finite(const openvdb::FloatGrid& grid, const std::string& source) {
+    throw InvalidInput(source + ": grid '" + grid.getName() + "' holds non-finite values (NaN or infinity)");
+}
+
+} // namespace
+
+Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source) {
+    const GridFrame frame = grid_frame(grid, source);
+    const openvdb::CoordBBox& box = frame.box;
     const std::array<std::int64_t, 3> dims{box.dim()[0], box.dim()[1], box.dim()[2]};
     require_memory(voxmap_bytes(dims), 0, source + ": a dense voxmap of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
 
-    const auto origin = xform.indexToWorld(box.min());
-    Voxmap voxmap(dims, Eigen::Vector3d(origin[0], origin[1], origin[2]), h);
+    const auto origin = grid.transform().indexToWorld(box.min());
+    Voxmap voxmap(dims, Eigen::Vector3d(origin[0], origin[1], origin[2]), frame.h);
     using DenseT = openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ>;
     DenseT dense(box, voxmap.density.data());
     openvdb::tools::copyToDense(grid, dense);
 
     std::atomic<bool> non_finite{false};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            float v = voxmap.density[i];
-            if (!std::isfinite(v)) {
-                non_finite = true;
-                v = 0;
-            }
-            if (level_set) v = 0.5f - 0.5f * v / float(h);
-            voxmap.density[i] = v < 0 ? 0.0f : (v > 1 ? 1.0f : v);
-        }
+        bool bad = false;
+        for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = to_density(voxmap.density[i], frame, bad);
+        if (bad) non_finite = true;
     });
-    if (non_finite) throw InvalidInput(source + ": grid '" + grid.getName() + "' holds non-finite values (NaN or infinity)");
+    if (non_finite) throw_non_finite(grid, source);
+    return voxmap;
+}
+
+SparseVoxmap sparse_from_float_grid(const openvdb::FloatGrid& grid, const std::string& source) {
+    GridFrame frame = grid_frame(grid, source);
+    // Start the voxmap on a multiple of 8 so that each of its blocks is one of the grid's leaf positions: a leaf
+    // becomes a block, a tile (or background) one value. The few extra voxels are the grid's own values.
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    static_assert(LeafT::DIM == SparseVoxmap::kSide);
+    constexpr int B = int(SparseVoxmap::kSide);
+    openvdb::Coord lo = frame.box.min();
+    for (int a = 0; a < 3; ++a) lo[a] &= ~(B - 1);
+    frame.box = openvdb::CoordBBox(lo, frame.box.max());
+    const std::array<std::int64_t, 3> dims{frame.box.dim()[0], frame.box.dim()[1], frame.box.dim()[2]};
+    const auto origin = grid.transform().indexToWorld(lo);
+    SparseVoxmap voxmap(dims, Eigen::Vector3d(origin[0], origin[1], origin[2]), frame.h);
+    const auto& bd = voxmap.block_dims();
+    std::atomic<bool> non_finite{false};
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, voxmap.block_count()), [&](const auto& r) {
+        auto accessor = grid.getConstAccessor();
+        float values[SparseVoxmap::kBlockVoxels];
+        bool bad = false;
+        for (std::int64_t b = r.begin(); b != r.end(); ++b) {
+            const openvdb::Coord at = lo + openvdb::Coord(int(b % bd[0]) * B, int((b / bd[0]) % bd[1]) * B, int(b / (bd[0] * bd[1])) * B);
+            if (const LeafT* leaf = accessor.probeConstLeaf(at)) {
+                const float* v = leaf->buffer().data();
+                for (int k = 0; k < B; ++k)
+                    for (int j = 0; j < B; ++j)
+                        for (int i = 0; i < B; ++i) values[i + B * (j + B * k)] = to_density(v[(i << 6) | (j << 3) | k], frame, bad);
+                voxmap.set_block(b, values);
+            } else {
+                voxmap.set_uniform(b, to_density(accessor.getValue(at), frame, bad));
+            }
+        }
+        if (bad) non_finite = true;
+    });
+    if (non_finite) throw_non_finite(grid, source);
     return voxmap;
 }
 

@@ -30,19 +30,7 @@ void write_density_grid(openvdb::FloatGrid::Ptr grid, const std::array<std::int6
     });
 }
 
-} // namespace
-
-void write_vdb(const Voxmap& voxmap, const std::string& path) {
-    openvdb::initialize();
-    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims, path);
-}
-
-void write_vdb(const SparseVoxmap& voxmap, const std::string& path) {
-    openvdb::initialize();
-    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims(), path);
-}
-
-Voxmap read_vdb(const std::string& path, const std::string& grid_name) {
+openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::string& grid_name) {
     openvdb::initialize();
     std::error_code ec;
     if (!std::filesystem::exists(path, ec)) throw IOError(path + ": no such file");
@@ -68,7 +56,25 @@ Voxmap read_vdb(const std::string& path, const std::string& grid_name) {
     }
     if (!grid)
         throw InvalidInput(path + (grid_name.empty() ? ": holds no float grid" : ": holds no float grid named '" + grid_name + "'"));
-    return vdb_internal::from_float_grid(*grid, path);
+    return grid;
+}
+
+} // namespace
+
+void write_vdb(const Voxmap& voxmap, const std::string& path) {
+    openvdb::initialize();
+    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims, path);
+}
+
+void write_vdb(const SparseVoxmap& voxmap, const std::string& path) {
+    openvdb::initialize();
+    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims(), path);
+}
+
+Voxmap read_vdb(const std::string& path, const std::string& grid_name) { return vdb_internal::from_float_grid(*read_float_grid(path, grid_name), path); }
+
+SparseVoxmap read_vdb_sparse(const std::string& path, const std::string& grid_name) {
+    return vdb_internal::sparse_from_float_grid(*read_float_grid(path, grid_name), path);
 }
 
 } // namespace voxwarp

@@ -25,4 +25,9 @@ void write_vdb(const SparseVoxmap& voxmap, const std::string& path);
 ///        empty, its transform is not a uniform scale + translation, or it holds non-finite values.
 Voxmap read_vdb(const std::string& path, const std::string& grid_name = {});
 
+/// The same grid, block-sparse (memory along the surface only). Its origin is moved down to a multiple of 8 of
+/// the grid's index space, so each block is one of the grid's leaves; the extra voxels hold the grid's values.
+/// @throw as read_vdb.
+SparseVoxmap read_vdb_sparse(const std::string& path, const std::string& grid_name = {});
+
 } // namespace voxwarp

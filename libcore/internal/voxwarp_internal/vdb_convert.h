@@ -24,6 +24,8 @@ openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap);
 /// density with a ramp one voxel wide on each side of the zero crossing; other grids are clamped to [0, 1].
 /// `source` names the file in messages. @throw InvalidInput, ResourceLimit.
 Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source);
+/// The same, block-sparse, its origin moved down to the nearest multiple of 8 voxels (so blocks are leaves).
+SparseVoxmap sparse_from_float_grid(const openvdb::FloatGrid& grid, const std::string& source);
 
 } // namespace voxwarp::vdb_internal
 
