@@ -391,23 +391,33 @@ private:
         for (std::int64_t i = 0; i < n; ++i) row[i] |= other[i];
     }
 
-    /// A voxmap row as mixed_slab reads it, `pad` zeros either side. A row whose blocks are all uniform zero is
-    /// not read: its buffer is zeroed once and remembered as such, so empty space costs a few block lookups.
+    /// A voxmap row as mixed_slab reads it, `pad` zeros either side, and what each of its blocks is: kZero,
+    /// kOne (uniform pure values) or kOther. A row whose blocks are all uniform zero is not read: its buffer is
+    /// zeroed once and remembered as such, so empty space costs a few block lookups.
+    static constexpr std::uint8_t kZero = 0, kOne = 1, kOther = 2;
     struct RowBuffer {
         std::vector<float> values;
+        std::vector<std::uint8_t> kinds; // per block along x
         std::int64_t pad = 0;
         bool any = false;  // some value is nonzero
         bool zero = true;  // values are all zero
-        RowBuffer(std::int64_t n, std::int64_t p) : values(std::size_t(n + 2 * p), 0.0f), pad(p) {}
+        RowBuffer(std::int64_t n, std::int64_t p)
+            : values(std::size_t(n + 2 * p), 0.0f), kinds(std::size_t((n + SparseVoxmap::kSide - 1) / SparseVoxmap::kSide), kZero), pad(p) {}
         void load(const SparseVoxmap& vm, std::int64_t j, std::int64_t k) {
             if (vm.row_is_zero(j, k)) {
-                if (!zero) std::fill(values.begin(), values.end(), 0.0f);
+                if (!zero) std::fill(values.begin(), values.end(), 0.0f), std::fill(kinds.begin(), kinds.end(), kZero);
                 zero = true;
                 any = false;
                 return;
             }
             any = vm.read_row(j, k, values.data() + pad);
             zero = !any;
+            const std::int64_t b0 = vm.block_index(0, j >> 3, k >> 3);
+            for (std::size_t bx = 0; bx < kinds.size(); ++bx) {
+                const std::int64_t b = b0 + std::int64_t(bx);
+                const float u = vm.block_uniform(b);
+                kinds[bx] = vm.block_values(b) ? kOther : u == 0.0f ? kZero : u == 1.0f ? kOne : kOther;
+            }
         }
         const float* data() const { return values.data() + pad; }
     };
@@ -436,12 +446,25 @@ private:
                 const float *c = w.here.data(), *s = w.previous.data(), *nb = w.next.data(), *d = w.below.data(), *u = w.above.data();
                 std::uint8_t* m = mixed.data() + 2 * kReach;
                 bool any = false;
-                for (std::int64_t i = 0; i < n; ++i) {
-                    const float v = c[i];
-                    const float other = 1.0f - v; // for a pure voxel: the other side's value
-                    m[i] = (v != 0.0f && v != 1.0f) || c[i - 1] == other || c[i + 1] == other || s[i] == other || nb[i] == other || d[i] == other ||
-                           u[i] == other;
-                    any |= m[i] != 0;
+                const std::int64_t blocks = std::int64_t(w.here.kinds.size());
+                for (std::int64_t bx = 0; bx < blocks; ++bx) {
+                    const std::int64_t i0 = bx * SparseVoxmap::kSide, i1 = std::min(n, i0 + SparseVoxmap::kSide);
+                    // Eight voxels whose five rows' blocks, and the row's neighbour blocks along x, are all one pure
+                    // value hold no mixed voxel: skipped without a comparison.
+                    const std::uint8_t kind = w.here.kinds[std::size_t(bx)];
+                    const std::uint8_t left = bx > 0 ? w.here.kinds[std::size_t(bx - 1)] : kZero, right = bx + 1 < blocks ? w.here.kinds[std::size_t(bx + 1)] : kZero;
+                    if (kind != kOther && left == kind && right == kind && w.previous.kinds[std::size_t(bx)] == kind && w.next.kinds[std::size_t(bx)] == kind &&
+                        w.below.kinds[std::size_t(bx)] == kind && w.above.kinds[std::size_t(bx)] == kind) {
+                        std::fill(m + i0, m + i1, std::uint8_t(0));
+                        continue;
+                    }
+                    for (std::int64_t i = i0; i < i1; ++i) {
+                        const float v = c[i];
+                        const float other = 1.0f - v; // for a pure voxel: the other side's value
+                        m[i] = (v != 0.0f && v != 1.0f) || c[i - 1] == other || c[i + 1] == other || s[i] == other || nb[i] == other || d[i] == other ||
+                               u[i] == other;
+                        any |= m[i] != 0;
+                    }
                 }
                 if (any) {
                     // Along x into `line`, then OR-ed into the 2 kReach + 1 slab rows it reaches along y.
