@@ -150,6 +150,21 @@ TEST(Warp, FastPathMatchesTheNaiveReference) {
     EXPECT_LE(max_difference(to_dense(warp(domain, moved)), warp_reference(domain, moved)), 1e-6);
 }
 
+TEST(Warp, SharpStepsAtBlockEdgesMatchTheNaiveReference) {
+    // A binary voxmap (0 and 1 only: a sharp step, no ramp) whose solid box starts and ends on 8^3 block edges, so
+    // blocks of 1 meet blocks of 0 and the band must be found from the blocks' values alone, not their contents.
+    Voxmap input({40, 37, 35}, Eigen::Vector3d(0.2, -0.1, 0.3), 0.05);
+    for (std::int64_t k = 8; k < 24; ++k)
+        for (std::int64_t j = 8; j < 32; ++j)
+            for (std::int64_t i = 8; i < 32; ++i) input.at(i, j, k) = 1.0f;
+    ASSERT_EQ(to_sparse(input).stored_block_count(), 0); // every block uniform
+    const WarpDomain domain = make_domain(input, {.size = {6, 6, 6}});
+    const Lattice moved = jiggled(domain.lattice, 5, 0.7 * input.voxel_size);
+    const Voxmap fast = to_dense(warp(domain, moved));
+    EXPECT_LE(max_difference(fast, warp_reference(domain, moved)), 1e-6);
+    EXPECT_NEAR(enclosed_volume(fast), enclosed_volume(input), 0.05 * enclosed_volume(input));
+}
+
 TEST(Warp, NarrowBandMatchesTheNaiveReferenceOnALargeInterior) {
     // A sphere 40 voxels across: most of it lies beyond the band (2 voxels past the fractional densities),
     // where the fast path splats nothing and fills by side; the reference splats every voxel.
