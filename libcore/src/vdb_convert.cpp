@@ -113,9 +113,9 @@ GridFrame grid_frame(const openvdb::FloatGrid& grid, const std::string& source) 
 
 /// Grid value -> density: a level set's signed distance through a one-voxel ramp, anything else clamped to [0, 1].
 /// Sets `non_finite` (and returns 0) for NaN or infinity.
-inline float to_density(float v, const GridFrame& frame, bool& non_finite) {
+inline float to_density(float v, const GridFrame& frame, std::atomic<bool>& non_finite) {
     if (!std::isfinite(v)) {
-        non_finite = true;
+        non_finite.store(true, std::memory_order_relaxed);
         return 0.0f;
     }
     if (frame.level_set) v = 0.5f - 0.5f * v / float(frame.h);
@@ -142,9 +142,7 @@ Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source
 
     std::atomic<bool> non_finite{false};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
-        bool bad = false;
-        for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = to_density(voxmap.density[i], frame, bad);
-        if (bad) non_finite = true;
+        for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = to_density(voxmap.density[i], frame, non_finite);
     });
     if (non_finite) throw_non_finite(grid, source);
     return voxmap;
@@ -154,8 +152,6 @@ SparseVoxmap sparse_from_float_grid(const openvdb::FloatGrid& grid, const std::s
     GridFrame frame = grid_frame(grid, source);
     // Start the voxmap on a multiple of 8 so that each of its blocks is one of the grid's leaf positions: a leaf
     // becomes a block, a tile (or background) one value. The few extra voxels are the grid's own values.
-    using LeafT = openvdb::FloatTree::LeafNodeType;
-    static_assert(LeafT::DIM == SparseVoxmap::kSide);
     constexpr int B = int(SparseVoxmap::kSide);
     openvdb::Coord lo = frame.box.min();
     for (int a = 0; a < 3; ++a) lo[a] &= ~(B - 1);
@@ -163,26 +159,8 @@ SparseVoxmap sparse_from_float_grid(const openvdb::FloatGrid& grid, const std::s
     const std::array<std::int64_t, 3> dims{frame.box.dim()[0], frame.box.dim()[1], frame.box.dim()[2]};
     const auto origin = grid.transform().indexToWorld(lo);
     SparseVoxmap voxmap(dims, Eigen::Vector3d(origin[0], origin[1], origin[2]), frame.h);
-    const auto& bd = voxmap.block_dims();
     std::atomic<bool> non_finite{false};
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, voxmap.block_count()), [&](const auto& r) {
-        auto accessor = grid.getConstAccessor();
-        float values[SparseVoxmap::kBlockVoxels];
-        bool bad = false;
-        for (std::int64_t b = r.begin(); b != r.end(); ++b) {
-            const openvdb::Coord at = lo + openvdb::Coord(int(b % bd[0]) * B, int((b / bd[0]) % bd[1]) * B, int(b / (bd[0] * bd[1])) * B);
-            if (const LeafT* leaf = accessor.probeConstLeaf(at)) {
-                const float* v = leaf->buffer().data();
-                for (int k = 0; k < B; ++k)
-                    for (int j = 0; j < B; ++j)
-                        for (int i = 0; i < B; ++i) values[i + B * (j + B * k)] = to_density(v[(i << 6) | (j << 3) | k], frame, bad);
-                voxmap.set_block(b, values);
-            } else {
-                voxmap.set_uniform(b, to_density(accessor.getValue(at), frame, bad));
-            }
-        }
-        if (bad) non_finite = true;
-    });
+    grid_to_blocks(grid, lo, voxmap, [&](float v) { return to_density(v, frame, non_finite); });
     if (non_finite) throw_non_finite(grid, source);
     return voxmap;
 }

@@ -445,32 +445,6 @@ void grid_to_dense(const openvdb::FloatGrid& grid, Voxmap& out, F&& f) {
     });
 }
 
-/// The same into a sparse voxmap: a leaf becomes a block (stored unless f makes it uniform, as deep inside or
-/// far outside the ramp), a tile or background block one value.
-template <class F>
-void grid_to_sparse(const openvdb::FloatGrid& grid, SparseVoxmap& out, F&& f) {
-    using LeafT = openvdb::FloatTree::LeafNodeType;
-    constexpr std::int64_t B = SparseVoxmap::kSide;
-    static_assert(LeafT::DIM == B);
-    const auto& bd = out.block_dims();
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, out.block_count()), [&](const auto& range) {
-        auto accessor = grid.getConstAccessor();
-        float block[SparseVoxmap::kBlockVoxels];
-        for (std::int64_t b = range.begin(); b != range.end(); ++b) {
-            const openvdb::Coord origin{int((b % bd[0]) * B), int(((b / bd[0]) % bd[1]) * B), int((b / (bd[0] * bd[1])) * B)};
-            if (const LeafT* leaf = accessor.probeConstLeaf(origin)) {
-                const float* values = leaf->buffer().data();
-                for (std::int64_t k = 0; k < B; ++k)
-                    for (std::int64_t j = 0; j < B; ++j)
-                        for (std::int64_t i = 0; i < B; ++i) block[i + B * (j + B * k)] = f(values[(i << 6) | (j << 3) | k]);
-                out.set_block(b, block);
-            } else {
-                out.set_uniform(b, f(accessor.getValue(origin)));
-            }
-        }
-    });
-}
-
 } // namespace voxelize_internal
 
 using namespace voxelize_internal;
@@ -618,7 +592,8 @@ SparseVoxmap voxelize_sparse(const TriangleMesh& mesh, const VoxelizeOptions& op
         const auto level_set = flood_fill_level_set(mesh, *job.xform, job.half_width, job.progress);
         job.progress.stage("density");
         out = SparseVoxmap(job.frame.dims, job.frame.origin, job.frame.voxel_size);
-        grid_to_sparse(*level_set, out, job.ramp);
+        // A leaf becomes a block (stored unless the ramp makes it uniform, deep inside or far outside), a tile one value.
+        vdb_internal::grid_to_blocks(*level_set, openvdb::Coord(0, 0, 0), out, job.ramp);
     } else {
         voxelize_scan(mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
         out = to_sparse(job.frame);
