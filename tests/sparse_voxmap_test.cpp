@@ -20,7 +20,7 @@ Voxmap ball(std::array<std::int64_t, 3> dims, double radius) {
     Voxmap v(dims, Eigen::Vector3d(0.5, -1, 2), 0.25);
     std::mt19937 random(7);
     std::uniform_real_distribution<float> fraction(0.01f, 0.99f);
-    const Eigen::Vector3d centre(double(dims[0]) / 2, double(dims[1]) / 2, double(dims[2]) / 2);
+    const Eigen::Vector3d centre = Eigen::Vector3d(double(dims[0]), double(dims[1]), double(dims[2])) / 2;
     for (std::int64_t k = 0; k < dims[2]; ++k)
         for (std::int64_t j = 0; j < dims[1]; ++j)
             for (std::int64_t i = 0; i < dims[0]; ++i) {

@@ -2,6 +2,8 @@
 #include <voxwarp/extract.h>
 #include <voxwarp_internal/vdb_convert.h>
 
+#include "marching_cubes.h"
+
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <string>
@@ -52,6 +54,7 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
     openvdb::initialize();
     Progress progress(options.progress, "extract");
     progress.report(0.0);
+    if (options.adaptivity == 0 && !options.quads) return extract_internal::marching_cubes(voxmap, float(options.isovalue), progress);
     return extract_grid(vdb_internal::to_density_grid(voxmap), options, progress);
 }
 

@@ -1,10 +1,14 @@
 /// @file extract.h
 /// @brief Voxmap -> indexed, shared-vertex, watertight polygon mesh of its 0.5 isosurface.
 ///
-/// Uses OpenVDB's VolumeToMesh (dual contouring of the sign changes, vertices placed from the linearly
-/// interpolated edge crossings). Output positions are world units in the voxmap's frame; faces are
-/// counter-clockwise seen from outside (outside = density below the isovalue). Where the density is zero on
-/// the voxmap's border the result is a closed 2-manifold.
+/// Triangles come from marching cubes: one vertex on each grid edge whose ends lie on opposite sides, at the
+/// linear zero of the two densities, so the crossings voxelize fits are met exactly. An ambiguous grid face
+/// (inside corners on one diagonal only) joins its outside corners; voxelize makes every such face with a wall
+/// between its outside corners unambiguous, so walls thinner than a voxel hold. Everything past the voxmap's
+/// border counts as outside, so the result is a closed 2-manifold. With `adaptivity` > 0 or `quads` the mesh
+/// comes from OpenVDB's VolumeToMesh instead (dual contouring: one vertex per cell, the average of its edge
+/// crossings), for its quads and merged flat areas. Output positions are world units in the voxmap's frame;
+/// faces are counter-clockwise seen from outside (outside = density below the isovalue).
 #pragma once
 
 #include <voxwarp/progress.h>
@@ -16,12 +20,12 @@ namespace voxwarp {
 
 struct ExtractOptions {
     double isovalue = 0.5;   ///< density of the surface, (0, 1)
-    double adaptivity = 0.0; ///< OpenVDB's adaptivity [0, 1]: 0 = uniform faces, higher merges flat areas
-    bool quads = false;      ///< keep OpenVDB's quads instead of splitting each into two triangles
+    double adaptivity = 0.0; ///< OpenVDB's adaptivity [0, 1]: 0 = uniform faces, higher merges flat areas (VolumeToMesh)
+    bool quads = false;      ///< OpenVDB's quads instead of triangles (VolumeToMesh)
     ProgressCallback progress; ///< optional progress / cancel
 };
 
-/// Extract the isosurface. Parallel (oneTBB, inside OpenVDB).
+/// Extract the isosurface. Parallel (oneTBB); the output does not depend on the thread count.
 /// @throw InvalidInput for an isovalue outside (0, 1) or adaptivity outside [0, 1]; Cancelled.
 TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options = {});
 /// The same from a block-sparse voxmap: its blocks become the grid's leaves and tiles directly.

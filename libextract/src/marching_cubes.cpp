@@ -1,0 +1,270 @@
+// Marching cubes with one fixed rule for ambiguous grid faces (inside corners on one diagonal, outside corners on
+// the other): the outside corners join, the inside corners stay apart. A face's decision depends on its four
+// corners alone, so the two cells that share it agree and the surface is a closed 2-manifold. Inside is thus
+// 6-connected and outside 18-connected, as with OpenVDB's VolumeToMesh, whose rule voxelize already meets: where a
+// wall thinner than a voxel runs between an ambiguous face's outside corners, voxelize makes one of them inside
+// (keep_thin_walls). Every vertex lies on a grid edge at the linear zero of its two voxels' densities, so a
+// crossing that voxelize placed (fit_crossings) is met exactly; a dual mesher such as VolumeToMesh averages a
+// cell's crossings into one vertex, which lands between the two faces of a wall about a voxel thick.
+#include "marching_cubes.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace voxwarp::extract_internal {
+
+namespace {
+
+/// Cell corner c sits at offset (c & 1, (c >> 1) & 1, c >> 2). Edge e joins corners along axis e / 4; its
+/// low corner is the (e % 4)-th corner with that axis' bit clear.
+struct CellTable {
+    std::array<std::array<int, 2>, 12> edge_corners{};
+    /// Per edge: the two faces of the cell it bounds, as bits 2 axis + side.
+    std::array<std::uint8_t, 12> edge_faces{};
+    /// Per inside-corner mask: the surface's loops in the cell, as edge lists, clockwise seen from outside.
+    std::array<std::vector<std::vector<int>>, 256> loops;
+
+    CellTable() {
+        int edge_of[8][8];
+        for (int axis = 0, e = 0; axis < 3; ++axis)
+            for (int c = 0; c < 8; ++c)
+                if (!(c >> axis & 1)) {
+                    edge_corners[std::size_t(e)] = {c, c | 1 << axis};
+                    edge_of[c][c | 1 << axis] = edge_of[c | 1 << axis][c] = e;
+                    for (int other = 0; other < 3; ++other)
+                        if (other != axis) edge_faces[std::size_t(e)] |= std::uint8_t(1 << (2 * other + (c >> other & 1)));
+                    ++e;
+                }
+        for (int mask = 0; mask < 256; ++mask) {
+            auto inside = [&](int c) { return (mask >> c & 1) != 0; };
+            std::array<int, 12> next;
+            next.fill(-1);
+            for (int axis = 0; axis < 3; ++axis)
+                for (int side = 0; side < 2; ++side) {
+                    // The face's corners counter-clockwise seen from outside the cell.
+                    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+                    const int uv[4][2] = {{0, 0}, {side, 1 - side}, {1, 1}, {1 - side, side}};
+                    int corner[4];
+                    for (int n = 0; n < 4; ++n) corner[n] = side << axis | uv[n][0] << u | uv[n][1] << v;
+                    // A segment runs from an exit (inside -> outside along the walk) to the entry before it: it
+                    // cuts off the inside corners between them, so the outside corners of an ambiguous face join.
+                    // Seen from the neighbouring cell the walk runs backwards: the same pairs, opposite directions.
+                    for (int n = 0; n < 4; ++n) {
+                        if (!(inside(corner[n]) && !inside(corner[(n + 1) % 4]))) continue;
+                        for (int m = 1; m < 4; ++m) {
+                            const int a = corner[(n + 3 * m) % 4], b = corner[(n + 3 * m + 1) % 4];
+                            if (!inside(a) && inside(b)) {
+                                next[std::size_t(edge_of[corner[n]][corner[(n + 1) % 4]])] = edge_of[a][b];
+                                break;
+                            }
+                        }
+                    }
+                }
+            std::array<bool, 12> used{};
+            for (int e = 0; e < 12; ++e) {
+                if (next[std::size_t(e)] < 0 || used[std::size_t(e)]) continue;
+                std::vector<int> loop;
+                for (int f = e; !used[std::size_t(f)]; f = next[std::size_t(f)]) used[std::size_t(f)] = true, loop.push_back(f);
+                loops[std::size_t(mask)].push_back(std::move(loop));
+            }
+        }
+    }
+};
+
+const CellTable& cell_table() {
+    static const CellTable table;
+    return table;
+}
+
+constexpr int kCells = 8;                          // cells per block side
+constexpr int kSide = kCells + 1;                  // corner values per block side
+constexpr int kEdgeBits = 3 * kCells * kCells * kCells; // edges a block owns: 3 from each low corner
+constexpr int kWords = kEdgeBits / 64;
+constexpr std::uint32_t kCentre = 1u << 31;
+
+/// Block (cx, cy, cz) holds the cells whose low corner is voxel 8 c - 1 + l, l in [0, 8), so that the cells
+/// straddling the voxmap's border (the voxel past it reads 0) are included; it owns the edges from those low
+/// corners along +x, +y and +z. A vertex is referred to as (edge bit) | (neighbour block offset dx + 2 dy +
+/// 4 dz) << 11, or as kCentre | n for the block's n-th loop centre.
+struct Block {
+    std::array<std::uint64_t, kWords> crossing{}; // bit ((axis * 8 + z) * 8 + y) * 8 + x: edge crosses
+    std::array<std::uint32_t, kWords> before{};   // crossings in earlier words
+    std::uint32_t edges = 0;
+    std::vector<Eigen::Vector3d> points; // the owned crossings in bit order, then loop centres
+    std::vector<std::array<std::uint32_t, 3>> triangles;
+    std::uint64_t base = 0;
+
+    std::uint32_t rank(std::uint32_t bit) const {
+        const std::uint64_t below = crossing[bit >> 6] & ((std::uint64_t(1) << (bit & 63)) - 1);
+        return before[bit >> 6] + std::uint32_t(std::popcount(below));
+    }
+};
+
+} // namespace
+
+TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress) {
+    const CellTable& table = cell_table();
+    const auto& dims = voxmap.dims();
+    const std::array<std::int64_t, 3> count{(dims[0] + 1 + kCells - 1) / kCells, (dims[1] + 1 + kCells - 1) / kCells,
+                                            (dims[2] + 1 + kCells - 1) / kCells};
+    const std::int64_t total = count[0] * count[1] * count[2];
+
+    // Blocks whose corners are not all on one side, by the data blocks they overlap (stored ones may cross).
+    std::vector<std::int32_t> active(std::size_t(total), -1);
+    std::vector<std::int64_t> order;
+    for (std::int64_t c = 0; c < total; ++c) {
+        const std::int64_t at[3] = {c % count[0], (c / count[0]) % count[1], c / (count[0] * count[1])};
+        bool in = false, out = false, stored = false;
+        for (int axis = 0; axis < 3; ++axis)
+            out |= kCells * at[axis] - 1 < 0 || kCells * at[axis] + kCells - 1 >= dims[std::size_t(axis)];
+        for (int d = 0; d < 8 && !stored; ++d) {
+            const std::int64_t b[3] = {at[0] - 1 + (d & 1), at[1] - 1 + (d >> 1 & 1), at[2] - 1 + (d >> 2)};
+            bool exists = true;
+            for (int axis = 0; axis < 3; ++axis) exists &= b[axis] >= 0 && b[axis] < voxmap.block_dims()[std::size_t(axis)];
+            if (!exists) continue;
+            const std::int64_t index = voxmap.block_index(b[0], b[1], b[2]);
+            if (voxmap.block_values(index)) stored = true;
+            else (voxmap.block_uniform(index) >= isovalue ? in : out) = true;
+        }
+        if (stored || (in && out)) active[std::size_t(c)] = std::int32_t(order.size()), order.push_back(c);
+    }
+    std::vector<Block> blocks(order.size());
+    const double h = voxmap.voxel_size();
+
+    // Pass 1: per block, its crossings and its triangles in block-relative references.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4), [&](const auto& range) {
+        std::array<float, kSide * kSide * kSide> value;
+        for (std::size_t n = range.begin(); n != range.end() && !progress.cancelled(); ++n) {
+            Block& block = blocks[n];
+            const std::int64_t c = order[n];
+            const std::int64_t g0[3] = {kCells * (c % count[0]) - 1, kCells * ((c / count[0]) % count[1]) - 1,
+                                        kCells * (c / (count[0] * count[1])) - 1};
+            for (int z = 0; z < kSide; ++z)
+                for (int y = 0; y < kSide; ++y)
+                    for (int x = 0; x < kSide; ++x) value[std::size_t(x + kSide * (y + kSide * z))] = voxmap.at(g0[0] + x, g0[1] + y, g0[2] + z);
+            auto at = [&](int x, int y, int z) { return value[std::size_t(x + kSide * (y + kSide * z))]; };
+            auto crossing_point = [&](const int* low, int axis) {
+                int high[3] = {low[0], low[1], low[2]};
+                ++high[axis];
+                const float a = at(low[0], low[1], low[2]), b = at(high[0], high[1], high[2]);
+                Eigen::Vector3d p = voxmap.world(double(g0[0] + low[0]), double(g0[1] + low[1]), double(g0[2] + low[2]));
+                p[axis] += h * double((isovalue - a) / (b - a));
+                return p;
+            };
+            static constexpr int step[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+            for (int axis = 0; axis < 3; ++axis)
+                for (int z = 0; z < kCells; ++z)
+                    for (int y = 0; y < kCells; ++y)
+                        for (int x = 0; x < kCells; ++x) {
+                            if ((at(x, y, z) >= isovalue) == (at(x + step[axis][0], y + step[axis][1], z + step[axis][2]) >= isovalue)) continue;
+                            const int bit = ((axis * kCells + z) * kCells + y) * kCells + x, low[3] = {x, y, z};
+                            block.crossing[std::size_t(bit >> 6)] |= std::uint64_t(1) << (bit & 63);
+                            block.points.push_back(crossing_point(low, axis));
+                        }
+            for (int w = 0; w < kWords; ++w) {
+                block.before[std::size_t(w)] = block.edges;
+                block.edges += std::uint32_t(std::popcount(block.crossing[std::size_t(w)]));
+            }
+            std::array<std::uint32_t, 12> reference;
+            std::array<Eigen::Vector3d, 12> point;
+            std::array<int, 12> edge;
+            for (int z = 0; z < kCells; ++z)
+                for (int y = 0; y < kCells; ++y)
+                    for (int x = 0; x < kCells; ++x) {
+                        int mask = 0;
+                        for (int corner = 0; corner < 8; ++corner)
+                            mask |= int(at(x + (corner & 1), y + (corner >> 1 & 1), z + (corner >> 2)) >= isovalue) << corner;
+                        if (mask == 0 || mask == 255) continue;
+                        for (const auto& loop : table.loops[std::size_t(mask)]) {
+                            for (std::size_t m = 0; m < loop.size(); ++m) {
+                                const int e = loop[m], corner = table.edge_corners[std::size_t(e)][0], axis = e / 4;
+                                edge[m] = e;
+                                int low[3] = {x + (corner & 1), y + (corner >> 1 & 1), z + (corner >> 2)}, neighbour = 0;
+                                point[m] = crossing_point(low, axis);
+                                for (int d = 0; d < 3; ++d)
+                                    if (low[d] == kCells) low[d] = 0, neighbour |= 1 << d;
+                                reference[m] = std::uint32_t(((axis * kCells + low[2]) * kCells + low[1]) * kCells + low[0]) | std::uint32_t(neighbour) << 11;
+                            }
+                            // Cut ears off the loop, each time the one whose new edge is shortest (for four
+                            // corners: the shorter diagonal); triangles are the loop reversed, counter-clockwise
+                            // seen from outside. A new edge between two crossings on one face of the cell is not
+                            // allowed: the neighbouring cell may join the same two (an ambiguous face), and the
+                            // edge would have more than two triangles. Should no ear be left, the rest is a fan
+                            // around the loop's centre.
+                            std::size_t size = loop.size();
+                            while (size > 3) {
+                                std::size_t ear = size;
+                                double best = std::numeric_limits<double>::infinity();
+                                for (std::size_t m = 0; m < size; ++m) {
+                                    const std::size_t before = (m + size - 1) % size, after = (m + 1) % size;
+                                    if (table.edge_faces[std::size_t(edge[before])] & table.edge_faces[std::size_t(edge[after])]) continue;
+                                    const double length = (point[before] - point[after]).squaredNorm();
+                                    if (length < best) best = length, ear = m;
+                                }
+                                if (ear == size) break;
+                                const std::size_t before = (ear + size - 1) % size, after = (ear + 1) % size;
+                                block.triangles.push_back({reference[after], reference[ear], reference[before]});
+                                for (std::size_t m = ear; m + 1 < size; ++m) reference[m] = reference[m + 1], point[m] = point[m + 1], edge[m] = edge[m + 1];
+                                --size;
+                            }
+                            if (size == 3) {
+                                block.triangles.push_back({reference[2], reference[1], reference[0]});
+                            } else {
+                                Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+                                for (std::size_t m = 0; m < size; ++m) centre += point[m];
+                                const std::uint32_t middle = kCentre | std::uint32_t(block.points.size() - block.edges);
+                                block.points.push_back(centre / double(size));
+                                for (std::size_t m = 0; m < size; ++m) block.triangles.push_back({middle, reference[(m + 1) % size], reference[m]});
+                            }
+                        }
+                    }
+        }
+    });
+    progress.check();
+    progress.report(0.6);
+
+    std::uint64_t vertices = 0, triangles = 0;
+    for (Block& block : blocks) block.base = vertices, vertices += block.points.size(), triangles += block.triangles.size();
+    TriangleMesh mesh;
+    mesh.vertices.resize(std::size_t(vertices));
+    mesh.triangles.resize(std::size_t(triangles));
+    std::vector<std::uint64_t> first_triangle(blocks.size() + 1, 0);
+    for (std::size_t n = 0; n < blocks.size(); ++n) first_triangle[n + 1] = first_triangle[n] + blocks[n].triangles.size();
+
+    // Pass 2: global indices (a block's vertices follow those of the blocks before it).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 16), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            Block& block = blocks[n];
+            std::copy(block.points.begin(), block.points.end(), mesh.vertices.begin() + std::ptrdiff_t(block.base));
+            const std::int64_t c = order[n];
+            const std::int64_t at[3] = {c % count[0], (c / count[0]) % count[1], c / (count[0] * count[1])};
+            std::array<const Block*, 8> neighbour{};
+            for (int d = 0; d < 8; ++d) {
+                const std::int64_t b[3] = {at[0] + (d & 1), at[1] + (d >> 1 & 1), at[2] + (d >> 2)};
+                if (b[0] < count[0] && b[1] < count[1] && b[2] < count[2]) {
+                    const std::int32_t id = active[std::size_t(b[0] + count[0] * (b[1] + count[1] * b[2]))];
+                    if (id >= 0) neighbour[std::size_t(d)] = &blocks[std::size_t(id)];
+                }
+            }
+            auto index = [&](std::uint32_t reference) -> std::int32_t {
+                if (reference & kCentre) return std::int32_t(block.base + block.edges + (reference & ~kCentre));
+                // A crossing edge's owner has a crossing among its corners, so it is active.
+                const Block& owner = *neighbour[reference >> 11];
+                return std::int32_t(owner.base + owner.rank(reference & 2047));
+            };
+            std::size_t out = std::size_t(first_triangle[n]);
+            for (const auto& t : block.triangles) mesh.triangles[out++] = {index(t[0]), index(t[1]), index(t[2])};
+        }
+    });
+    progress.report(1.0);
+    return mesh;
+}
+
+} // namespace voxwarp::extract_internal
