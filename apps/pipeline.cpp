@@ -115,7 +115,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     VoxelizeOptions vo = options.voxelize;
     vo.progress = options.progress;
     // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
-    // voxel of surface area, measured on the bunny); the extracted mesh and its grid take less than that.
+    // voxel of surface area, measured on the bunny); the extracted mesh takes less than that.
     const Voxmap frame = voxelize_frame(mesh, vo);
     require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)), vo.max_memory_bytes,
                    "deforming at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));

@@ -1,11 +1,11 @@
 // Marching cubes with one fixed rule for ambiguous grid faces (inside corners on one diagonal, outside corners on
 // the other): the outside corners join, the inside corners stay apart. A face's decision depends on its four
-// corners alone, so the two cells that share it agree and the surface is a closed 2-manifold. Inside is thus
-// 6-connected and outside 18-connected, as with OpenVDB's VolumeToMesh, whose rule voxelize already meets: where a
-// wall thinner than a voxel runs between an ambiguous face's outside corners, voxelize makes one of them inside
-// (keep_thin_walls). Every vertex lies on a grid edge at the linear zero of its two voxels' densities, so a
-// crossing that voxelize placed (fit_crossings) is met exactly; a dual mesher such as VolumeToMesh averages a
-// cell's crossings into one vertex, which lands between the two faces of a wall about a voxel thick.
+// corners alone, so the two cells that share it agree and the surface is a closed 2-manifold; inside is 6-connected
+// and outside 18-connected. voxelize's thin-wall pass (keep_thin_walls) is written for this rule: where a wall
+// thinner than a voxel runs between an ambiguous face's outside corners, it makes one of them inside. Every vertex
+// lies on a grid edge at the linear zero of its two voxels' densities, so a crossing that voxelize placed
+// (fit_crossings) is met exactly; a dual mesher such as OpenVDB's VolumeToMesh averages a cell's crossings into one
+// vertex, which lands between the two faces of a wall about a voxel thick.
 #include "marching_cubes.h"
 
 #include <tbb/blocked_range.h>

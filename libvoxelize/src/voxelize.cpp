@@ -176,13 +176,13 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
 /// Keep walls thinner than a voxel. Two kinds of voxel pairs let the extracted surface open through a wall:
 /// - neighbours along an axis, both outside, with the wall between them (it holds neither centre);
 /// - the outside corners of an ambiguous grid face (inside corners on one diagonal, outside on the other), with
-///   the wall between the outside pair: VolumeToMesh decides such a face by the signs alone and may join the
-///   outside corners, cutting the wall along the face (a plate along a face diagonal came apart into strips).
+///   the wall between the outside pair: extract joins the outside corners of such a face (so may OpenVDB's
+///   VolumeToMesh), cutting the wall along the face (a plate along a face diagonal came apart into strips).
 /// For each, the end nearer the wall is made inside. The mesh separates a pair when the segment between the two
 /// centres crosses it; only pairs near the surface are tested. Making a voxel inside can leave new ambiguous
 /// faces, so the face pass repeats until none is left (the inside only grows: it ends). The values set here are
 /// provisional, just inside; fit_crossings then places the surface. Ambiguous cube interiors (two opposite
-/// corners outside) need nothing: VolumeToMesh keeps the two corners apart. Returns the voxels changed.
+/// corners outside) need nothing: extract keeps the two corners apart. Returns the voxels changed.
 std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress& progress) {
     const double h = phi.voxel_size;
     const float near = float(2 * h), inside_value = float(-0.05 * h);
@@ -272,8 +272,9 @@ std::int64_t keep_thin_walls(Voxmap& phi, const WindingNumber& winding, Progress
 /// across, with nothing of the same side within two voxels. A scan's self-overlaps and folds (and thin walls
 /// made to hold) leave such crumbs; a closed part or cavity that small cannot be resolved at this voxel size
 /// anyway (it would come out as a few triangles). A fill over the voxel's side (26-connected inside, 6-connected
-/// outside: the pockets VolumeToMesh meshes as separate bubbles), from each voxel near the surface, within the
-/// 5^3 window around it, that never reaches the window's border finds one; the voxel then takes the other side.
+/// outside: an island must stand clear even of diagonal contact, a pocket only of face contact), from each voxel
+/// near the surface, within the 5^3 window around it, that never reaches the window's border finds one; the
+/// voxel then takes the other side.
 /// Returns the voxels changed.
 std::int64_t drop_specks(Voxmap& phi, Progress& progress) {
     const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
@@ -324,9 +325,9 @@ std::int64_t drop_specks(Voxmap& phi, Progress& progress) {
     return changed;
 }
 
-/// Put the surface where the mesh crosses the grid. VolumeToMesh places the surface on each voxel edge whose ends
-/// lie on opposite sides at the linearly interpolated zero of phi, and (1 - t) phi_a + t phi_b = 0 is linear in
-/// the two values, so each such edge gives one linear equation once t is known. A signed distance satisfies them
+/// Put the surface where the mesh crosses the grid. Extract puts a vertex on each voxel edge whose ends lie on
+/// opposite sides, at the linearly interpolated zero of phi, and (1 - t) phi_a + t phi_b = 0 is linear in the two
+/// values, so each such edge gives one linear equation once t is known. A signed distance satisfies them
 /// for a locally flat surface, but inside a wall thinner than two voxels a voxel's distance is to the nearer face
 /// only, which misplaces the far face's crossing by up to a third of a voxel. t comes from the mesh, measured from
 /// the inside end a:
