@@ -112,8 +112,8 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("--mode", a->mode, "volume (re-polygonized, crease-free) or vertex (classic FFD of the input's vertices, for comparison)")
         ->check(CLI::IsMember({"volume", "vertex"}))
         ->capture_default_str();
-    cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas")->capture_default_str();
-    auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Keep quads instead of triangles");
+    cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
+    auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->add_option("--faces", a->options.target_faces, "Decimate the output to about this many triangles (CGAL edge collapse)")
         ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40))
         ->excludes(quads);

@@ -20,8 +20,8 @@ void add_extract(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("-o,--output", args->output, "Output mesh (.obj .off .ply .stl .om)")->required();
     cmd->add_option("--grid", args->grid, "Name of the float grid to read");
     cmd->add_option("--isovalue", args->options.isovalue, "Density of the surface")->capture_default_str();
-    cmd->add_option("--adaptivity", args->options.adaptivity, "OpenVDB adaptivity in [0, 1]: merge faces in flat areas")->capture_default_str();
-    cmd->add_flag("--quads", args->options.quads, "Keep quads instead of triangles");
+    cmd->add_option("--adaptivity", args->options.adaptivity, "OpenVDB adaptivity in [0, 1]: merge faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
+    cmd->add_flag("--quads", args->options.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->callback([args, &global, &action] {
         action = [args, &global] {
             if (!is_mesh_path(args->output)) throw InvalidInput(args->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");

@@ -96,10 +96,8 @@ constexpr std::uint32_t kCentre = 1u << 31;
 struct Block {
     std::array<std::uint64_t, kWords> crossing{}; // bit ((axis * 8 + z) * 8 + y) * 8 + x: edge crosses
     std::array<std::uint32_t, kWords> before{};   // crossings in earlier words
-    std::uint32_t edges = 0;
-    std::vector<Eigen::Vector3d> points; // the owned crossings in bit order, then loop centres
-    std::vector<std::array<std::uint32_t, 3>> triangles;
-    std::uint64_t base = 0;
+    std::uint32_t edges = 0, centres = 0, triangles = 0;
+    std::uint64_t first_vertex = 0, first_triangle = 0; // the block's share of the output, in order
 
     std::uint32_t rank(std::uint32_t bit) const {
         const std::uint64_t below = crossing[bit >> 6] & ((std::uint64_t(1) << (bit & 63)) - 1);
@@ -107,23 +105,103 @@ struct Block {
     }
 };
 
+/// One block's cells: reports its crossings in bit order (`crossing(bit, point)`), each loop centre it needs
+/// (`centre(point)`, returning its reference) and its triangles (`triangle(a, b, c)`, references), counter-
+/// clockwise seen from outside. Run twice with the same input, it reports the same things in the same order.
+template <class Crossing, class Centre, class Triangle>
+void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* g0, Crossing&& crossing, Centre&& centre, Triangle&& triangle) {
+    const CellTable& table = cell_table();
+    const double h = voxmap.voxel_size();
+    std::array<float, kSide * kSide * kSide> value;
+    for (int z = 0; z < kSide; ++z)
+        for (int y = 0; y < kSide; ++y)
+            for (int x = 0; x < kSide; ++x) value[std::size_t(x + kSide * (y + kSide * z))] = voxmap.at(g0[0] + x, g0[1] + y, g0[2] + z);
+    auto at = [&](int x, int y, int z) { return value[std::size_t(x + kSide * (y + kSide * z))]; };
+    auto crossing_point = [&](const int* low, int axis) {
+        int high[3] = {low[0], low[1], low[2]};
+        ++high[axis];
+        const float a = at(low[0], low[1], low[2]), b = at(high[0], high[1], high[2]);
+        Eigen::Vector3d p = voxmap.world(double(g0[0] + low[0]), double(g0[1] + low[1]), double(g0[2] + low[2]));
+        p[axis] += h * double((isovalue - a) / (b - a));
+        return p;
+    };
+    static constexpr int step[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (int axis = 0; axis < 3; ++axis)
+        for (int z = 0; z < kCells; ++z)
+            for (int y = 0; y < kCells; ++y)
+                for (int x = 0; x < kCells; ++x) {
+                    if ((at(x, y, z) >= isovalue) == (at(x + step[axis][0], y + step[axis][1], z + step[axis][2]) >= isovalue)) continue;
+                    const int low[3] = {x, y, z};
+                    crossing(std::uint32_t(((axis * kCells + z) * kCells + y) * kCells + x), crossing_point(low, axis));
+                }
+    std::array<std::uint32_t, 12> reference;
+    std::array<Eigen::Vector3d, 12> point;
+    std::array<int, 12> edge;
+    for (int z = 0; z < kCells; ++z)
+        for (int y = 0; y < kCells; ++y)
+            for (int x = 0; x < kCells; ++x) {
+                int mask = 0;
+                for (int corner = 0; corner < 8; ++corner) mask |= int(at(x + (corner & 1), y + (corner >> 1 & 1), z + (corner >> 2)) >= isovalue) << corner;
+                if (mask == 0 || mask == 255) continue;
+                for (const auto& loop : table.loops[std::size_t(mask)]) {
+                    for (std::size_t m = 0; m < loop.size(); ++m) {
+                        const int e = loop[m], corner = table.edge_corners[std::size_t(e)][0], axis = e / 4;
+                        edge[m] = e;
+                        int low[3] = {x + (corner & 1), y + (corner >> 1 & 1), z + (corner >> 2)}, neighbour = 0;
+                        point[m] = crossing_point(low, axis);
+                        for (int d = 0; d < 3; ++d)
+                            if (low[d] == kCells) low[d] = 0, neighbour |= 1 << d;
+                        reference[m] = std::uint32_t(((axis * kCells + low[2]) * kCells + low[1]) * kCells + low[0]) | std::uint32_t(neighbour) << 11;
+                    }
+                    // Cut ears off the loop, each time the one whose new edge is shortest (for four corners: the
+                    // shorter diagonal); triangles are the loop reversed, counter-clockwise seen from outside. A
+                    // new edge between two crossings on one face of the cell is not allowed: the neighbouring cell
+                    // may join the same two (an ambiguous face), and the edge would have more than two triangles.
+                    // Should no ear be left, the rest is a fan around the loop's centre.
+                    std::size_t size = loop.size();
+                    while (size > 3) {
+                        std::size_t ear = size;
+                        double best = std::numeric_limits<double>::infinity();
+                        for (std::size_t m = 0; m < size; ++m) {
+                            const std::size_t before = (m + size - 1) % size, after = (m + 1) % size;
+                            if (table.edge_faces[std::size_t(edge[before])] & table.edge_faces[std::size_t(edge[after])]) continue;
+                            const double length = (point[before] - point[after]).squaredNorm();
+                            if (length < best) best = length, ear = m;
+                        }
+                        if (ear == size) break;
+                        triangle(reference[(ear + 1) % size], reference[ear], reference[(ear + size - 1) % size]);
+                        for (std::size_t m = ear; m + 1 < size; ++m) reference[m] = reference[m + 1], point[m] = point[m + 1], edge[m] = edge[m + 1];
+                        --size;
+                    }
+                    if (size == 3) {
+                        triangle(reference[2], reference[1], reference[0]);
+                    } else {
+                        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+                        for (std::size_t m = 0; m < size; ++m) sum += point[m];
+                        const std::uint32_t middle = centre(Eigen::Vector3d(sum / double(size)));
+                        for (std::size_t m = 0; m < size; ++m) triangle(middle, reference[(m + 1) % size], reference[m]);
+                    }
+                }
+            }
+}
+
 } // namespace
 
 TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress) {
-    const CellTable& table = cell_table();
     const auto& dims = voxmap.dims();
     const std::array<std::int64_t, 3> count{(dims[0] + 1 + kCells - 1) / kCells, (dims[1] + 1 + kCells - 1) / kCells,
                                             (dims[2] + 1 + kCells - 1) / kCells};
     const std::int64_t total = count[0] * count[1] * count[2];
+    auto coordinates = [&](std::int64_t c) { return std::array<std::int64_t, 3>{c % count[0], (c / count[0]) % count[1], c / (count[0] * count[1])}; };
 
     // Blocks whose corners are not all on one side, by the data blocks they overlap (stored ones may cross).
     std::vector<std::int32_t> active(std::size_t(total), -1);
     std::vector<std::int64_t> order;
     for (std::int64_t c = 0; c < total; ++c) {
-        const std::int64_t at[3] = {c % count[0], (c / count[0]) % count[1], c / (count[0] * count[1])};
+        const auto at = coordinates(c);
         bool in = false, out = false, stored = false;
         for (int axis = 0; axis < 3; ++axis)
-            out |= kCells * at[axis] - 1 < 0 || kCells * at[axis] + kCells - 1 >= dims[std::size_t(axis)];
+            out |= kCells * at[std::size_t(axis)] - 1 < 0 || kCells * at[std::size_t(axis)] + kCells - 1 >= dims[std::size_t(axis)];
         for (int d = 0; d < 8 && !stored; ++d) {
             const std::int64_t b[3] = {at[0] - 1 + (d & 1), at[1] - 1 + (d >> 1 & 1), at[2] - 1 + (d >> 2)};
             bool exists = true;
@@ -136,115 +214,42 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
         if (stored || (in && out)) active[std::size_t(c)] = std::int32_t(order.size()), order.push_back(c);
     }
     std::vector<Block> blocks(order.size());
-    const double h = voxmap.voxel_size();
+    auto first_corner = [&](std::size_t n) {
+        const auto at = coordinates(order[n]);
+        return std::array<std::int64_t, 3>{kCells * at[0] - 1, kCells * at[1] - 1, kCells * at[2] - 1};
+    };
 
-    // Pass 1: per block, its crossings and its triangles in block-relative references.
+    // Pass 1 counts: each block's crossings (as bits, so that a vertex's number is its rank), loop centres and
+    // triangles. Pass 2 meshes each block again and writes straight into the output at the block's offsets, so
+    // the mesh is never held twice.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order.size(), 4), [&](const auto& range) {
-        std::array<float, kSide * kSide * kSide> value;
         for (std::size_t n = range.begin(); n != range.end() && !progress.cancelled(); ++n) {
             Block& block = blocks[n];
-            const std::int64_t c = order[n];
-            const std::int64_t g0[3] = {kCells * (c % count[0]) - 1, kCells * ((c / count[0]) % count[1]) - 1,
-                                        kCells * (c / (count[0] * count[1])) - 1};
-            for (int z = 0; z < kSide; ++z)
-                for (int y = 0; y < kSide; ++y)
-                    for (int x = 0; x < kSide; ++x) value[std::size_t(x + kSide * (y + kSide * z))] = voxmap.at(g0[0] + x, g0[1] + y, g0[2] + z);
-            auto at = [&](int x, int y, int z) { return value[std::size_t(x + kSide * (y + kSide * z))]; };
-            auto crossing_point = [&](const int* low, int axis) {
-                int high[3] = {low[0], low[1], low[2]};
-                ++high[axis];
-                const float a = at(low[0], low[1], low[2]), b = at(high[0], high[1], high[2]);
-                Eigen::Vector3d p = voxmap.world(double(g0[0] + low[0]), double(g0[1] + low[1]), double(g0[2] + low[2]));
-                p[axis] += h * double((isovalue - a) / (b - a));
-                return p;
-            };
-            static constexpr int step[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-            for (int axis = 0; axis < 3; ++axis)
-                for (int z = 0; z < kCells; ++z)
-                    for (int y = 0; y < kCells; ++y)
-                        for (int x = 0; x < kCells; ++x) {
-                            if ((at(x, y, z) >= isovalue) == (at(x + step[axis][0], y + step[axis][1], z + step[axis][2]) >= isovalue)) continue;
-                            const int bit = ((axis * kCells + z) * kCells + y) * kCells + x, low[3] = {x, y, z};
-                            block.crossing[std::size_t(bit >> 6)] |= std::uint64_t(1) << (bit & 63);
-                            block.points.push_back(crossing_point(low, axis));
-                        }
+            const auto g0 = first_corner(n);
+            mesh_block(
+                voxmap, isovalue, g0.data(), [&](std::uint32_t bit, const Eigen::Vector3d&) { block.crossing[bit >> 6] |= std::uint64_t(1) << (bit & 63); },
+                [&](const Eigen::Vector3d&) { return kCentre | block.centres++; }, [&](std::uint32_t, std::uint32_t, std::uint32_t) { ++block.triangles; });
             for (int w = 0; w < kWords; ++w) {
                 block.before[std::size_t(w)] = block.edges;
                 block.edges += std::uint32_t(std::popcount(block.crossing[std::size_t(w)]));
             }
-            std::array<std::uint32_t, 12> reference;
-            std::array<Eigen::Vector3d, 12> point;
-            std::array<int, 12> edge;
-            for (int z = 0; z < kCells; ++z)
-                for (int y = 0; y < kCells; ++y)
-                    for (int x = 0; x < kCells; ++x) {
-                        int mask = 0;
-                        for (int corner = 0; corner < 8; ++corner)
-                            mask |= int(at(x + (corner & 1), y + (corner >> 1 & 1), z + (corner >> 2)) >= isovalue) << corner;
-                        if (mask == 0 || mask == 255) continue;
-                        for (const auto& loop : table.loops[std::size_t(mask)]) {
-                            for (std::size_t m = 0; m < loop.size(); ++m) {
-                                const int e = loop[m], corner = table.edge_corners[std::size_t(e)][0], axis = e / 4;
-                                edge[m] = e;
-                                int low[3] = {x + (corner & 1), y + (corner >> 1 & 1), z + (corner >> 2)}, neighbour = 0;
-                                point[m] = crossing_point(low, axis);
-                                for (int d = 0; d < 3; ++d)
-                                    if (low[d] == kCells) low[d] = 0, neighbour |= 1 << d;
-                                reference[m] = std::uint32_t(((axis * kCells + low[2]) * kCells + low[1]) * kCells + low[0]) | std::uint32_t(neighbour) << 11;
-                            }
-                            // Cut ears off the loop, each time the one whose new edge is shortest (for four
-                            // corners: the shorter diagonal); triangles are the loop reversed, counter-clockwise
-                            // seen from outside. A new edge between two crossings on one face of the cell is not
-                            // allowed: the neighbouring cell may join the same two (an ambiguous face), and the
-                            // edge would have more than two triangles. Should no ear be left, the rest is a fan
-                            // around the loop's centre.
-                            std::size_t size = loop.size();
-                            while (size > 3) {
-                                std::size_t ear = size;
-                                double best = std::numeric_limits<double>::infinity();
-                                for (std::size_t m = 0; m < size; ++m) {
-                                    const std::size_t before = (m + size - 1) % size, after = (m + 1) % size;
-                                    if (table.edge_faces[std::size_t(edge[before])] & table.edge_faces[std::size_t(edge[after])]) continue;
-                                    const double length = (point[before] - point[after]).squaredNorm();
-                                    if (length < best) best = length, ear = m;
-                                }
-                                if (ear == size) break;
-                                const std::size_t before = (ear + size - 1) % size, after = (ear + 1) % size;
-                                block.triangles.push_back({reference[after], reference[ear], reference[before]});
-                                for (std::size_t m = ear; m + 1 < size; ++m) reference[m] = reference[m + 1], point[m] = point[m + 1], edge[m] = edge[m + 1];
-                                --size;
-                            }
-                            if (size == 3) {
-                                block.triangles.push_back({reference[2], reference[1], reference[0]});
-                            } else {
-                                Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-                                for (std::size_t m = 0; m < size; ++m) centre += point[m];
-                                const std::uint32_t middle = kCentre | std::uint32_t(block.points.size() - block.edges);
-                                block.points.push_back(centre / double(size));
-                                for (std::size_t m = 0; m < size; ++m) block.triangles.push_back({middle, reference[(m + 1) % size], reference[m]});
-                            }
-                        }
-                    }
         }
     });
     progress.check();
-    progress.report(0.6);
+    progress.report(0.5);
 
     std::uint64_t vertices = 0, triangles = 0;
-    for (Block& block : blocks) block.base = vertices, vertices += block.points.size(), triangles += block.triangles.size();
+    for (Block& block : blocks) {
+        block.first_vertex = vertices, vertices += block.edges + block.centres;
+        block.first_triangle = triangles, triangles += block.triangles;
+    }
     TriangleMesh mesh;
     mesh.vertices.resize(std::size_t(vertices));
     mesh.triangles.resize(std::size_t(triangles));
-    std::vector<std::uint64_t> first_triangle(blocks.size() + 1, 0);
-    for (std::size_t n = 0; n < blocks.size(); ++n) first_triangle[n + 1] = first_triangle[n] + blocks[n].triangles.size();
-
-    // Pass 2: global indices (a block's vertices follow those of the blocks before it).
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 16), [&](const auto& range) {
-        for (std::size_t n = range.begin(); n != range.end(); ++n) {
-            Block& block = blocks[n];
-            std::copy(block.points.begin(), block.points.end(), mesh.vertices.begin() + std::ptrdiff_t(block.base));
-            const std::int64_t c = order[n];
-            const std::int64_t at[3] = {c % count[0], (c / count[0]) % count[1], c / (count[0] * count[1])};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end() && !progress.cancelled(); ++n) {
+            const Block& block = blocks[n];
+            const auto at = coordinates(order[n]);
             std::array<const Block*, 8> neighbour{};
             for (int d = 0; d < 8; ++d) {
                 const std::int64_t b[3] = {at[0] + (d & 1), at[1] + (d >> 1 & 1), at[2] + (d >> 2)};
@@ -254,15 +259,23 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
                 }
             }
             auto index = [&](std::uint32_t reference) -> std::int32_t {
-                if (reference & kCentre) return std::int32_t(block.base + block.edges + (reference & ~kCentre));
+                if (reference & kCentre) return std::int32_t(block.first_vertex + block.edges + (reference & ~kCentre));
                 // A crossing edge's owner has a crossing among its corners, so it is active.
                 const Block& owner = *neighbour[reference >> 11];
-                return std::int32_t(owner.base + owner.rank(reference & 2047));
+                return std::int32_t(owner.first_vertex + owner.rank(reference & 2047));
             };
-            std::size_t out = std::size_t(first_triangle[n]);
-            for (const auto& t : block.triangles) mesh.triangles[out++] = {index(t[0]), index(t[1]), index(t[2])};
+            std::uint64_t next_crossing = block.first_vertex, next_centre = block.first_vertex + block.edges, next_triangle = block.first_triangle;
+            const auto g0 = first_corner(n);
+            mesh_block(
+                voxmap, isovalue, g0.data(), [&](std::uint32_t, const Eigen::Vector3d& p) { mesh.vertices[std::size_t(next_crossing++)] = p; },
+                [&](const Eigen::Vector3d& p) {
+                    mesh.vertices[std::size_t(next_centre)] = p;
+                    return kCentre | std::uint32_t(next_centre++ - block.first_vertex - block.edges);
+                },
+                [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) { mesh.triangles[std::size_t(next_triangle++)] = {index(a), index(b), index(c)}; });
         }
     });
+    progress.check();
     progress.report(1.0);
     return mesh;
 }
