@@ -51,10 +51,10 @@ TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options) {
 
 TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) {
     check(options);
-    openvdb::initialize();
     Progress progress(options.progress, "extract");
     progress.report(0.0);
     if (options.adaptivity == 0 && !options.quads) return extract_internal::marching_cubes(voxmap, float(options.isovalue), progress);
+    openvdb::initialize();
     return extract_grid(vdb_internal::to_density_grid(voxmap), options, progress);
 }
 
