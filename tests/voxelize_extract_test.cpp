@@ -294,6 +294,27 @@ TEST(Extract, RandomFieldsGiveWatertightSurfacesOnGridEdges) {
     }
 }
 
+// --quads and --adaptivity mesh with OpenVDB's VolumeToMesh: quads that come out watertight once split, and
+// fewer faces where the surface is flat, both on the analytic sphere's volume.
+TEST(Extract, QuadsAndAdaptivityGoThroughOpenVDB) {
+    const double R = 1.0;
+    const Voxmap voxmap = voxelize(test::sphere_mesh({0, 0, 0}, R, 5), {.resolution = 48});
+    const double exact_volume = 4.0 / 3.0 * std::numbers::pi * R * R * R;
+    const TriangleMesh plain = extract(voxmap);
+    const TriangleMesh quads = extract(voxmap, {.quads = true});
+    ASSERT_GT(quads.quads.size(), 1000u);
+    const TriangleMesh split = quads.triangulated();
+    expect_closed_manifold(split);
+    EXPECT_EQ(topology(split).euler, 2);
+    EXPECT_NEAR(enclosed_volume(split), exact_volume, 0.01 * exact_volume);
+    // Merged faces are chords of the sphere: they cut volume off (5 % at 0.5 on this 48-voxel sphere).
+    const TriangleMesh adaptive = extract(voxmap, {.adaptivity = 0.5});
+    expect_closed_manifold(adaptive);
+    EXPECT_LT(adaptive.triangles.size(), plain.triangles.size() * 3 / 4);
+    EXPECT_LT(enclosed_volume(adaptive), enclosed_volume(plain));
+    EXPECT_NEAR(enclosed_volume(adaptive), exact_volume, 0.1 * exact_volume);
+}
+
 TEST(Decimate, ReachesTheTargetAndKeepsTheSphere) {
     const Voxmap voxmap = voxelize(test::sphere_mesh({0, 0, 0}, 1.0, 5), {.resolution = 64});
     const TriangleMesh full = extract(voxmap);
