@@ -1,13 +1,11 @@
 #include "cli_common.h"
-#include "pipeline.h"
+#include <voxwarp/deform.h>
 
 #include <voxwarp/atomic_file.h>
 #include <voxwarp/errors.h>
 #include <voxwarp/mesh_io.h>
 #include <voxwarp/resources.h>
 #include <voxwarp/vdb_io.h>
-
-#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <cstdio>
@@ -50,49 +48,18 @@ auto attributing_errors(const DeformArgs& a, F&& f) -> decltype(f()) {
     });
 }
 
-nlohmann::json report_json(const DeformArgs& a, const DeformReport& r, double seconds) {
-    nlohmann::json j;
-    j["input"] = a.input;
-    j["edits_file"] = a.edits;
-    j["output"] = a.output;
-    j["mode"] = a.mode;
-    j["voxel_size"] = r.voxel_size;
-    j["dims"] = {r.dims[0], r.dims[1], r.dims[2]};
-    j["volume_before"] = r.volume_before;
-    j["volume_after"] = r.volume_after;
-    j["volume_change_percent"] = r.volume_before != 0 ? 100.0 * (r.volume_after / r.volume_before - 1.0) : 0.0;
-    j["seconds"] = {{"total", seconds}, {"voxelize", r.seconds_voxelize}, {"solve", r.seconds_solve}, {"warp", r.seconds_warp}, {"extract", r.seconds_extract}};
-    j["peak_resident_bytes"] = peak_resident_bytes();
-    for (const auto& e : r.edits) {
-        nlohmann::json je;
-        je["steps"] = e.steps;
-        je["folds_remain"] = e.folds_remain;
-        je["solver"] = e.least_squares ? "weighted least squares (Ceres)" : "minimum-norm pseudoinverse";
-        je["rank"] = e.rank;
-        je["unknowns"] = e.unknowns;
-        for (const auto& c : e.constraints)
-            je["constraints"].push_back({{"name", c.name}, {"kind", c.kind}, {"residual", c.residual}, {"residual_voxels", c.residual_voxels}});
-        j["edits"].push_back(je);
-    }
-    return j;
-}
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-void finish(const Global& global, const DeformArgs& a, const DeformReport& r, double seconds) {
-    for (const auto& e : r.edits) {
-        for (const auto& c : e.constraints)
-            if (c.residual_voxels > 0.5)
-                std::fprintf(stderr, "voxwarp: warning: %s misses its target by %.3g (%.2f voxels)\n", c.name.c_str(), c.residual, c.residual_voxels);
-        if (e.folds_remain && a.mode == "vertex")
-            std::fprintf(stderr, "voxwarp: warning: an edit folds the lattice map; vertex mode applies it as it is (surfaces may cross)\n");
-        else if (e.folds_remain)
-            std::fprintf(stderr, "voxwarp: warning: an edit still folds the lattice map after %d steps; raise --max-steps\n", e.steps);
-    }
+void finish(const Global& global, const DeformArgs& a, DeformReport& r, Clock::time_point start) {
+    for (const auto& w : deform_warnings(r)) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+    r.seconds_total = seconds_since(start);
     char line[256];
     std::snprintf(line, sizeof line, "volume %.6g -> %.6g (%+.2f%%), %zu edit(s), %.2f s", r.volume_before, r.volume_after,
-                  r.volume_before != 0 ? 100.0 * (r.volume_after / r.volume_before - 1.0) : 0.0, r.edits.size(), seconds);
+                  r.volume_before != 0 ? 100.0 * (r.volume_after / r.volume_before - 1.0) : 0.0, r.edits.size(), r.seconds_total);
     note(global, line);
     if (!a.report.empty()) {
-        const auto text = report_json(a, r, seconds).dump(2) + "\n";
+        const auto text = report_json(r, {{"input", a.input}, {"edits_file", a.edits}, {"output", a.output}});
         write_atomically(a.report, [&](const std::string& tmp) {
             std::ofstream out(tmp);
             out << text;
@@ -119,19 +86,22 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
         ->excludes(quads);
     cmd->callback([a, &global, &action] {
         action = [a, &global] {
-            const auto start = std::chrono::steady_clock::now();
+            const auto start = Clock::now();
             if (!is_mesh_path(a->output)) throw InvalidInput(a->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
             a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
             a->options.progress = stderr_progress(global);
             const EditScript script = read_edit_file(a->edits);
-            const TriangleMesh mesh = read_mesh(a->input);
             DeformReport report;
+            auto t = Clock::now();
+            const TriangleMesh mesh = read_mesh(a->input);
+            report.seconds_read = seconds_since(t);
             TriangleMesh out = attributing_errors(*a, [&] {
                 return a->mode == "vertex" ? deform_vertices(mesh, script, a->options, report) : deform_mesh(mesh, script, a->options, report);
             });
-            if (a->mode == "volume") report.volume_before = enclosed_volume(mesh.quads.empty() ? mesh : mesh.triangulated()), report.volume_after = enclosed_volume(out);
+            t = Clock::now();
             write_mesh(out, a->output);
-            finish(global, *a, report, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+            report.seconds_write = seconds_since(t);
+            finish(global, *a, report, start);
             note(global, "wrote " + a->output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces");
         };
     });
@@ -143,15 +113,19 @@ void add_warp(CLI::App& app, Global& global, Action& action) {
     add_common_options(cmd, *a, false);
     cmd->callback([a, &global, &action] {
         action = [a, &global] {
-            const auto start = std::chrono::steady_clock::now();
+            const auto start = Clock::now();
             a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
             a->options.progress = stderr_progress(global);
             const EditScript script = read_edit_file(a->edits);
-            SparseVoxmap voxmap = read_vdb_sparse(a->input);
             DeformReport report;
+            auto t = Clock::now();
+            SparseVoxmap voxmap = read_vdb_sparse(a->input);
+            report.seconds_read = seconds_since(t);
             voxmap = attributing_errors(*a, [&] { return deform_voxmap(std::move(voxmap), script, a->options, report); });
+            t = Clock::now();
             write_vdb(voxmap, a->output);
-            finish(global, *a, report, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+            report.seconds_write = seconds_since(t);
+            finish(global, *a, report, start);
         };
     });
 }

@@ -1,7 +1,7 @@
 // End to end: the bundled ear-stretch edit on the bunny (voxelize + solve + warp + extract), beside
 // OpenVDB's plain round trip (BM_RoundTripOpenVDB in bench_roundtrip.cpp) in the same run.
 #include "bench_common.h"
-#include "pipeline.h"
+#include <voxwarp/deform.h>
 
 #include <benchmark/benchmark.h>
 

@@ -1,7 +1,7 @@
 // End to end: mesh in, constraints, deformed mesh out, measured against the analytic answer in voxels.
 #include "test_helpers.h"
 
-#include "pipeline.h"
+#include <voxwarp/deform.h>
 
 #include <voxwarp/errors.h>
 #include <voxwarp/mesh_io.h>

@@ -8,8 +8,10 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 #include <random>
 
@@ -117,6 +119,33 @@ namespace voxwarp {
 
 std::vector<double> distances_to_surface(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& mesh) {
     return surface_distance_internal::distances(points, mesh);
+}
+
+std::vector<double> distances_to_surface_within(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& mesh, double radius) {
+    using namespace surface_distance_internal;
+    TriangleMesh storage;
+    const auto& faces = all_triangles(mesh, storage);
+    std::vector<double> out;
+    for (const auto& q : points) {
+        const Eigen::Vector3d lo = q.array() - radius, hi = q.array() + radius;
+        const double best = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, faces.size(), 4096), std::numeric_limits<double>::infinity(),
+            [&](const tbb::blocked_range<std::size_t>& r, double nearest) {
+                const Point query(q.x(), q.y(), q.z());
+                for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                    const Eigen::Vector3d &a = mesh.vertices[std::size_t(faces[f][0])], &b = mesh.vertices[std::size_t(faces[f][1])],
+                                          &c = mesh.vertices[std::size_t(faces[f][2])];
+                    if (((a.cwiseMin(b).cwiseMin(c)).array() > hi.array()).any() || ((a.cwiseMax(b).cwiseMax(c)).array() < lo.array()).any()) continue;
+                    const Triangle t(Point(a.x(), a.y(), a.z()), Point(b.x(), b.y(), b.z()), Point(c.x(), c.y(), c.z()));
+                    if (t.is_degenerate()) continue;
+                    nearest = std::min(nearest, std::sqrt(CGAL::to_double(CGAL::squared_distance(query, t))));
+                }
+                return nearest;
+            },
+            [](double x, double y) { return std::min(x, y); });
+        out.push_back(best <= radius ? best : std::numeric_limits<double>::infinity());
+    }
+    return out;
 }
 
 CreaseStats count_creases(const TriangleMesh& mesh, double threshold_degrees) {

@@ -1,3 +1,5 @@
+#include "constraint_rows.h"
+
 #include <voxwarp/constraints.h>
 #include <voxwarp/errors.h>
 
@@ -67,30 +69,26 @@ Eigen::VectorXd solve_least_squares(const Eigen::MatrixXd& J, const Eigen::Vecto
     return x;
 }
 
-} // namespace constraints_internal
-
-using namespace constraints_internal;
-
-ConstraintSolution solve_constraints(const Lattice& rest, const std::vector<Constraint>& constraints, const SolveOptions& options) {
+ConstraintRows constraint_rows(const Lattice& rest, const std::vector<Constraint>& constraints) {
     if (constraints.empty()) throw InvalidInput("constraint solve: no constraints");
-    std::vector<int> group;
-    const int g = control_point_groups(rest, group);
-    Eigen::VectorXd multiplicity = Eigen::VectorXd::Zero(g);
-    for (int p : group) multiplicity[p] += 1;
-    const Eigen::VectorXd inv_sqrt_mult = multiplicity.cwiseSqrt().cwiseInverse();
+    ConstraintRows out;
+    out.groups = control_point_groups(rest, out.group);
+    const auto& group = out.group;
+    out.multiplicity = Eigen::VectorXd::Zero(out.groups);
+    for (int p : group) out.multiplicity[p] += 1;
 
     const int m = int(constraints.size());
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(m, g); // rows of B S
-    Eigen::MatrixXd D(m, 3);                         // wanted displacement of each row
-    std::vector<bool> hard(std::size_t(m), false);
-    bool weighted = false;
+    out.terms.resize(std::size_t(m));
+    out.D.resize(m, 3);
+    out.hard.assign(std::size_t(m), false);
     const auto n = rest.size();
     for (int c = 0; c < m; ++c) {
         const Constraint& k = constraints[std::size_t(c)];
         const std::string who = k.name.empty() ? "constraint " + std::to_string(c) : k.name;
+        auto& terms = out.terms[std::size_t(c)];
         if (k.weight) {
             if (!(std::isfinite(*k.weight) && *k.weight > 0)) throw InvalidInput(who + ".weight: " + std::to_string(*k.weight) + ", expected a finite number > 0");
-            weighted = true;
+            out.weighted = true;
         }
         if (k.kind == ConstraintKind::control_point) {
             const auto& idx = k.control_point;
@@ -100,9 +98,9 @@ ConstraintSolution solve_constraints(const Lattice& rest, const std::vector<Cons
                                        std::to_string(idx[2]) + ") is outside the " + std::to_string(n[0]) + "x" + std::to_string(n[1]) + "x" +
                                        std::to_string(n[2]) + " lattice");
             if (!k.offset.allFinite()) throw InvalidInput(who + ".offset: not finite");
-            A(c, group[rest.flat_index(idx[0], idx[1], idx[2])]) = 1.0;
-            D.row(c) = k.offset.transpose();
-            hard[std::size_t(c)] = true;
+            terms.emplace_back(group[rest.flat_index(idx[0], idx[1], idx[2])], 1.0);
+            out.D.row(c) = k.offset.transpose();
+            out.hard[std::size_t(c)] = true;
             continue;
         }
         if (!k.point.allFinite() || !k.to.allFinite()) throw InvalidInput(who + ": point or target is not finite");
@@ -127,10 +125,35 @@ ConstraintSolution solve_constraints(const Lattice& rest, const std::vector<Cons
         for (int kk = 0; kk < 4; ++kk)
             for (int j = 0; j < 4; ++j)
                 for (int i = 0; i < 4; ++i)
-                    A(c, group[rest.flat_index(region[0] + i, region[1] + j, region[2] + kk)]) += w[std::size_t(i + 4 * (j + 4 * kk))];
-        D.row(c) = (k.kind == ConstraintKind::pin ? Eigen::Vector3d::Zero() : Eigen::Vector3d(k.to - k.point)).transpose();
-        hard[std::size_t(c)] = k.kind == ConstraintKind::pin;
+                    terms.emplace_back(group[rest.flat_index(region[0] + i, region[1] + j, region[2] + kk)], w[std::size_t(i + 4 * (j + 4 * kk))]);
+        out.D.row(c) = (k.kind == ConstraintKind::pin ? Eigen::Vector3d::Zero() : Eigen::Vector3d(k.to - k.point)).transpose();
+        out.hard[std::size_t(c)] = k.kind == ConstraintKind::pin;
     }
+    return out;
+}
+
+std::vector<std::pair<int, double>> merged(const std::vector<std::pair<int, double>>& terms) {
+    std::map<int, double> sum;
+    for (const auto& [q, w] : terms) sum[q] += w;
+    return {sum.begin(), sum.end()};
+}
+
+} // namespace constraints_internal
+
+using namespace constraints_internal;
+
+ConstraintSolution solve_constraints(const Lattice& rest, const std::vector<Constraint>& constraints, const SolveOptions& options) {
+    const ConstraintRows rows = constraint_rows(rest, constraints);
+    const std::vector<int>& group = rows.group;
+    const int g = rows.groups;
+    const Eigen::VectorXd inv_sqrt_mult = rows.multiplicity.cwiseSqrt().cwiseInverse();
+    const int m = int(constraints.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(m, g); // rows of B S
+    for (int c = 0; c < m; ++c)
+        for (const auto& [q, w] : rows.terms[std::size_t(c)]) A(c, q) += w;
+    const Eigen::MatrixXd& D = rows.D;
+    const std::vector<bool>& hard = rows.hard;
+    const bool weighted = rows.weighted;
 
     // Unknowns no constraint touches stay put in the minimum-norm and in the damped answer alike: drop them,
     // so the dense solves grow with the constraints (at most 64 columns each), not with the lattice.
@@ -172,9 +195,9 @@ ConstraintSolution solve_constraints(const Lattice& rest, const std::vector<Cons
         const double mean_row = Ay.rowwise().squaredNorm().mean();
         const double lambda = options.damping * (mean_row > 0 ? mean_row : 1.0);
         // Residual rows: sqrt(w_c) (A_c (y0 + N z) - d_c) for soft rows, sqrt(lambda) (y0 + N z) for zero velocity.
-        const Eigen::Index rows = Eigen::Index(soft_rows.size()) + g;
-        Eigen::MatrixXd J(rows, N.cols());
-        Eigen::MatrixXd T(rows, 3);
+        const Eigen::Index residual_rows = Eigen::Index(soft_rows.size()) + g;
+        Eigen::MatrixXd J(residual_rows, N.cols());
+        Eigen::MatrixXd T(residual_rows, 3);
         for (std::size_t q = 0; q < soft_rows.size(); ++q) {
             const int c = soft_rows[q];
             const double sw = std::sqrt(constraints[std::size_t(c)].weight.value_or(1.0));

@@ -131,6 +131,8 @@ Constraint parse_constraint(const Context& ctx, const json& v, const std::string
 
 using namespace edit_file_internal;
 
+std::string to_string(Solver solver) { return solver == Solver::rigid ? "rigid" : "min-norm"; }
+
 EditScript parse_edit_script(const std::string& text, const std::string& source) {
     const Context ctx{source};
     json root;
@@ -149,10 +151,20 @@ EditScript parse_edit_script(const std::string& text, const std::string& source)
         const std::string path = "edits[" + std::to_string(e) + "]";
         const json& edit = edits[e];
         if (!edit.is_object()) ctx.fail(path, "expected an object with \"constraints\", got " + describe(edit));
-        only_keys(ctx, edit, path, {"constraints"});
+        only_keys(ctx, edit, path, {"constraints", "solver", "preserve_volume"});
         const json& list = require(ctx, edit, path, "constraints");
         if (!list.is_array() || list.empty()) ctx.fail(path + ".constraints", "expected a non-empty array, got " + describe(list));
         Edit out;
+        if (edit.contains("solver")) {
+            const json& s = edit["solver"];
+            if (!s.is_string() || (s != "min-norm" && s != "rigid")) ctx.fail(path + ".solver", "expected \"min-norm\" or \"rigid\", got " + describe(s));
+            out.solver = s == "rigid" ? Solver::rigid : Solver::min_norm;
+        }
+        if (edit.contains("preserve_volume")) {
+            const json& p = edit["preserve_volume"];
+            if (!p.is_boolean()) ctx.fail(path + ".preserve_volume", "expected true or false, got " + describe(p));
+            out.preserve_volume = p.get<bool>();
+        }
         for (std::size_t c = 0; c < list.size(); ++c)
             out.constraints.push_back(parse_constraint(ctx, list[c], path + ".constraints[" + std::to_string(c) + "]"));
         script.edits.push_back(std::move(out));

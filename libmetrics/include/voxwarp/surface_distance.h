@@ -36,6 +36,11 @@ namespace voxwarp {
 /// when the mesh has no non-degenerate faces.
 std::vector<double> distances_to_surface(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& mesh);
 
+/// Distance from each world point to the faces of `mesh` that come within `radius` of it (no tree: one parallel
+/// pass over the faces per point, so a few points against a large mesh cost less than building a tree), world
+/// units; +infinity for a point no face comes that near.
+std::vector<double> distances_to_surface_within(const std::vector<Eigen::Vector3d>& points, const TriangleMesh& mesh, double radius);
+
 /// Edges whose dihedral angle (angle between the two faces' normals) exceeds a threshold: a mesh's creases.
 struct CreaseStats {
     std::int64_t creased = 0; ///< interior edges above the threshold

@@ -4,7 +4,8 @@
 /// {"lattice": {"size": 9 | [nx, ny, nz], "placement": "uniform" | "clamped", "padding": 0.25},   (all optional)
 ///  "edits": [ {"constraints": [ {"move": [x,y,z], "to": [x,y,z], "weight": w},
 ///                               {"pin": [x,y,z], "weight": w},
-///                               {"control_point": [i,j,k], "offset": [dx,dy,dz], "weight": w} ]} ]}
+///                               {"control_point": [i,j,k], "offset": [dx,dy,dz], "weight": w} ],
+///              "solver": "min-norm" | "rigid", "preserve_volume": false} ]}      (solver, preserve_volume optional)
 /// Points are world coordinates. Validation is strict: unknown or missing fields, wrong types, non-finite
 /// numbers and out-of-range values are refused with the file, the JSON path and what was expected.
 #pragma once
@@ -17,8 +18,18 @@
 
 namespace voxwarp {
 
+/// How an edit's constraints are turned into lattice motion.
+enum class Solver {
+    min_norm, ///< the least control-point motion (Hsu, Hughes & Kaufman's pseudoinverse): the default
+    rigid,    ///< as rigid as possible where the material is (rigid.h): bends and twists come out as such
+};
+
+std::string to_string(Solver solver);
+
 struct Edit {
     std::vector<Constraint> constraints; ///< each named by its JSON path, e.g. "edits[0].constraints[2]"
+    Solver solver = Solver::min_norm;
+    bool preserve_volume = false;        ///< keep the material's volume (det J = 1 over it), either solver
 };
 
 struct EditScript {

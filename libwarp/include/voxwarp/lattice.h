@@ -53,6 +53,10 @@ public:
     void set_point(int i, int j, int k, const Eigen::Vector3d& p) { points_[flat_index(i, j, k)] = p; }
     const std::vector<Eigen::Vector3d>& points() const { return points_; }
     std::vector<Eigen::Vector3d>& points() { return points_; }
+    /// The undeformed control points the lattice was built with (world units).
+    const std::vector<Eigen::Vector3d>& rest_points() const { return rest_points_; }
+    /// Undeformed world distance per parameter unit along each axis (the control-point spacing).
+    const Eigen::Vector3d& spacing() const { return spacing_; }
 
     /// B(s, t, u): world position of a parameter point. Parameters outside the domain extrapolate the
     /// boundary region's polynomial.

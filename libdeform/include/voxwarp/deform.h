@@ -1,0 +1,94 @@
+/// @file deform.h
+/// @brief The end-to-end deform job: voxelize a mesh, apply an edit script (each edit's constraints solved on a
+///        fresh lattice over the previous result, the volume warped through it), re-polygonize; with its report.
+///
+/// This is what `voxwarp deform` / `voxwarp warp`, the editor's server and the Python module all run. Frames:
+/// world units throughout (the input mesh's own); residuals and misses are also given in voxels of the voxmap.
+#pragma once
+
+#include <voxwarp/edit_file.h>
+#include <voxwarp/extract.h>
+#include <voxwarp/voxelize.h>
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace voxwarp {
+
+struct DeformOptions {
+    VoxelizeOptions voxelize;      ///< resolution / voxel size of the volume
+    ExtractOptions extract;
+    bool preview = false;          ///< map-and-round warp (fast, aliased)
+    std::size_t target_faces = 0;  ///< > 0: decimate the extracted mesh to about this many faces (CGAL edge collapse)
+    int max_steps = 8;             ///< most steps a min-norm edit may be split into to avoid folding the lattice map
+    double far_fraction = 0.25;    ///< constraint points farther than this fraction of the model's size from its box are refused
+    ProgressCallback progress;     ///< optional progress / cancel (every stage)
+};
+
+struct ConstraintReport {
+    std::string name;              ///< its JSON path, e.g. "edits[0].constraints[2]"
+    std::string kind;              ///< "move", "pin" or "control_point"
+    double residual = 0;           ///< how far the lattice map misses the constraint, world units
+    double residual_voxels = 0;
+    /// move constraints: distance from the target to the surface the edit produced (the output mesh for the last
+    /// edit, the 0.5 isosurface of the edit's voxmap for earlier ones), voxels; < 0 when not measured.
+    double surface_miss_voxels = -1;
+    /// move constraints: distance from the moved point to the surface the edit started from, voxels (< 0: not measured).
+    double source_miss_voxels = -1;
+    /// move constraints of a mesh's first edit: distance from the moved point to the input mesh, voxels (< 0: not measured).
+    double model_miss_voxels = -1;
+    /// move constraints: no voxel within a voxel of the moved point reaches 0.5 (the feature under it, if any, is
+    /// thinner than a voxel and missing from the voxmap).
+    bool source_thin = false;
+    std::string miss_cause;        ///< why the surface misses by more than half a voxel, where known
+};
+
+struct EditReport {
+    std::string solver = "min-norm"; ///< "min-norm" or "rigid" (the edit file's choice)
+    bool preserve_volume = false;
+    int steps = 1;                   ///< the edit was applied in this many injective steps
+    bool folds_remain = false;       ///< the applied map folds somewhere (det J <= 0)
+    int folded_regions = 0;          ///< regions where it does (find_folds on the final lattice)
+    bool least_squares = false;
+    int rank = 0, unknowns = 0;
+    int iterations = 0;              ///< nonlinear solver iterations (rigid, preserve_volume)
+    double seconds_solve = 0;
+    double volume_before = 0, volume_after = 0; ///< voxmap mass before and after this edit, world units^3
+    std::vector<ConstraintReport> constraints;
+};
+
+struct DeformReport {
+    std::string mode = "volume";     ///< "volume" (re-polygonized) or "vertex" (classic FFD of the input's vertices)
+    double voxel_size = 0;
+    std::array<std::int64_t, 3> dims{};
+    double volume_before = 0, volume_after = 0; ///< world units^3: enclosed by the input and output meshes (voxmap mass for voxmaps)
+    std::vector<EditReport> edits;
+    double seconds_voxelize = 0, seconds_solve = 0, seconds_warp = 0, seconds_extract = 0;
+    double seconds_read = 0, seconds_write = 0, seconds_total = 0; ///< filled by callers that read and write files
+    std::size_t output_vertices = 0, output_faces = 0;
+};
+
+/// Apply every edit of `script` to a voxmap (each edit on a fresh lattice over the previous result).
+/// @throw InvalidInput for constraints far outside the model; see solve_constraints, warp. Cancelled.
+SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report);
+
+/// Mesh in, re-polygonized deformed mesh out. report.volume_before / after are the input's and output's enclosed
+/// volumes; per move constraint, how far the output surface misses its target.
+/// @throw InvalidInput (bad mesh, bad constraints, nothing left to extract), ResourceLimit (memory estimate),
+///        SolverFailure, Cancelled.
+TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report);
+
+/// The classic free-form deformation of the same solved lattices applied to the mesh's vertices (the creased
+/// baseline the papers argue against), for comparison.
+TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report);
+
+/// Warnings a user should see about a finished run, one line each (no "warning:" prefix): constraints that miss
+/// their targets by more than half a voxel (with the cause where known), maps that still fold.
+std::vector<std::string> deform_warnings(const DeformReport& report);
+
+/// The report as the JSON text `voxwarp deform --report` writes (schema in README.md, "Reports"). `fields` are
+/// added at the top level as strings (the CLI adds "input", "edits_file", "output").
+std::string report_json(const DeformReport& report, const std::map<std::string, std::string>& fields = {});
+
+} // namespace voxwarp

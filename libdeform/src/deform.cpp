@@ -1,0 +1,339 @@
+#include <voxwarp/decimate.h>
+#include <voxwarp/deform.h>
+#include <voxwarp/errors.h>
+#include <voxwarp/foldover.h>
+#include <voxwarp/resources.h>
+#include <voxwarp/rigid.h>
+#include <voxwarp/surface_distance.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <tuple>
+
+namespace voxwarp {
+
+namespace deform_internal {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+std::string kind_name(ConstraintKind k) { return k == ConstraintKind::move ? "move" : k == ConstraintKind::pin ? "pin" : "control_point"; }
+
+/// Refuse constraint points far from the model: the data box grown by far_fraction of its size.
+void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double fraction) {
+    const Eigen::Vector3d margin = fraction * (hi - lo);
+    for (const auto& c : constraints) {
+        if (c.kind == ConstraintKind::control_point) continue;
+        if ((c.point.array() < (lo - margin).array()).any() || (c.point.array() > (hi + margin).array()).any())
+            throw InvalidInput(c.name + ": point (" + std::to_string(c.point.x()) + ", " + std::to_string(c.point.y()) + ", " +
+                               std::to_string(c.point.z()) + ") lies far outside the model (bounds " + std::to_string(lo.x()) + ".." +
+                               std::to_string(hi.x()) + ", " + std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " +
+                               std::to_string(lo.z()) + ".." + std::to_string(hi.z()) + ")");
+    }
+}
+
+/// The constraints of step `s` of `steps`: moves advance by 1/steps of their way, offsets likewise.
+std::vector<Constraint> step_constraints(const std::vector<Constraint>& constraints, int s, int steps) {
+    std::vector<Constraint> out = constraints;
+    for (auto& c : out) {
+        if (c.kind == ConstraintKind::move) {
+            const Eigen::Vector3d d = c.to - c.point;
+            c.point = c.point + d * (double(s) / steps);
+            c.to = c.point + d / steps;
+        } else if (c.kind == ConstraintKind::control_point) {
+            c.offset /= steps;
+        }
+    }
+    return out;
+}
+
+/// One step's lattice: the min-norm answer, or, with preserve_volume, least motion that keeps the volume.
+ConstraintSolution solve_min_norm(const WarpDomain& domain, const std::vector<Constraint>& constraints, bool preserve_volume, const ProgressCallback& progress,
+                                  int& iterations) {
+    if (!preserve_volume) return solve_constraints(domain.lattice, constraints);
+    RigidSolution s = solve_rigid(domain.lattice, constraints, lattice_material(domain), {.rigid = false, .preserve_volume = true, .progress = progress});
+    iterations += s.iterations;
+    return s;
+}
+
+/// Solve one min-norm edit on `domain`, splitting it into as many steps (up to max_steps) as keep the map
+/// injective. Returns the step count; the solution is that of the first step.
+int plan_steps(const WarpDomain& domain, const Edit& edit, const DeformOptions& options, ConstraintSolution& first, bool& folds_remain, int& iterations) {
+    for (int steps = 1;; steps *= 2) {
+        first = solve_min_norm(domain, step_constraints(edit.constraints, 0, steps), edit.preserve_volume, options.progress, iterations);
+        folds_remain = !find_folds(first.lattice).empty();
+        if (!folds_remain || steps * 2 > options.max_steps) return steps;
+    }
+}
+
+void record(EditReport& er, const ConstraintSolution& solution, const std::vector<Constraint>& constraints, int steps, double h) {
+    er.least_squares = solution.least_squares;
+    er.rank = solution.rank;
+    er.unknowns = solution.unknowns;
+    for (std::size_t c = 0; c < constraints.size(); ++c) {
+        // A step's residual recurs in every step of the edit: report the edit's total.
+        const double r = solution.residuals[c] * steps;
+        ConstraintReport cr;
+        cr.name = constraints[c].name, cr.kind = kind_name(constraints[c].kind), cr.residual = r, cr.residual_voxels = r / h;
+        er.constraints.push_back(std::move(cr));
+    }
+}
+
+/// Distance from a world point to the 0.5 isosurface of `voxmap`, voxels, looking no farther than `reach` voxels
+/// (+infinity beyond). Marching cubes is local to each cell, so meshing a window around the point gives the very
+/// faces the whole voxmap's extraction has there; faces the window's own border closes are left out.
+double distance_to_isosurface(const SparseVoxmap& voxmap, const Eigen::Vector3d& point, double reach) {
+    const double h = voxmap.voxel_size();
+    const Eigen::Vector3d centre = voxmap.index_of(point);
+    const std::int64_t half = std::int64_t(std::ceil(reach)) + 2;
+    std::array<std::int64_t, 3> lo{}, dims{};
+    for (int a = 0; a < 3; ++a) {
+        lo[std::size_t(a)] = std::int64_t(std::floor(centre[a])) - half;
+        dims[std::size_t(a)] = 2 * half + 2;
+    }
+    Voxmap window;
+    window.dims = dims;
+    window.voxel_size = h;
+    window.origin = voxmap.world(double(lo[0]), double(lo[1]), double(lo[2]));
+    window.density.resize(std::size_t(dims[0] * dims[1] * dims[2]));
+    for (std::int64_t k = 0; k < dims[2]; ++k)
+        for (std::int64_t j = 0; j < dims[1]; ++j)
+            for (std::int64_t i = 0; i < dims[0]; ++i)
+                window.density[std::size_t(i + dims[0] * (j + dims[1] * k))] = voxmap.at(lo[0] + i, lo[1] + j, lo[2] + k);
+    TriangleMesh mesh = extract(window);
+    // Keep faces whose vertices all lie inside the window's grid: the others close the surface at its border.
+    TriangleMesh inner;
+    inner.vertices = mesh.vertices;
+    const Eigen::Vector3d first = window.origin, last = window.world(double(dims[0] - 1), double(dims[1] - 1), double(dims[2] - 1));
+    auto inside = [&](std::int32_t v) {
+        const Eigen::Vector3d& p = mesh.vertices[std::size_t(v)];
+        return (p.array() >= first.array()).all() && (p.array() <= last.array()).all();
+    };
+    for (const auto& t : mesh.triangles)
+        if (inside(t[0]) && inside(t[1]) && inside(t[2])) inner.triangles.push_back(t);
+    if (inner.triangles.empty()) return std::numeric_limits<double>::infinity();
+    return distances_to_surface_within({point}, inner, reach * h)[0] / h;
+}
+
+constexpr double kMissReach = 16; // voxels: misses beyond this are reported as "more than 16"
+
+/// Where the moves start, measured on the voxmap an edit starts from (before the warp consumes it): how far each
+/// point lies from its surface, and whether the feature under it is missing from the voxmap (no voxel within a
+/// voxel of the point reaches 0.5). Per constraint: {distance in voxels (-1 for other kinds), thin}.
+std::vector<std::pair<double, bool>> measure_sources(const std::vector<Constraint>& constraints, const SparseVoxmap& before) {
+    std::vector<std::pair<double, bool>> out(constraints.size(), {-1.0, false});
+    for (std::size_t c = 0; c < constraints.size(); ++c) {
+        if (constraints[c].kind != ConstraintKind::move) continue;
+        const Eigen::Vector3d centre = before.index_of(constraints[c].point);
+        float densest = 0;
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) densest = std::max(densest, before.sample(centre + Eigen::Vector3d(dx, dy, dz)));
+        out[c] = {distance_to_isosurface(before, constraints[c].point, kMissReach), densest < 0.5f};
+    }
+    return out;
+}
+
+/// Why the surface misses a move's target by more than half a voxel, where the measures tell.
+void explain_misses(EditReport& er) {
+    for (std::size_t c = 0; c < er.constraints.size(); ++c) {
+        ConstraintReport& cr = er.constraints[c];
+        cr.miss_cause.clear();
+        if (cr.kind != "move" || !(cr.surface_miss_voxels > 0.5)) continue;
+        char text[240];
+        const bool on_model = cr.model_miss_voxels >= 0 && cr.model_miss_voxels <= 0.5;
+        if (cr.residual_voxels > 0.5) {
+            std::snprintf(text, sizeof text, "the constraints conflict: the lattice map itself misses by %.2f voxels (least squares)", cr.residual_voxels);
+        } else if (cr.model_miss_voxels > 0.5) {
+            std::snprintf(text, sizeof text, "the point lies %.2f voxels off the model's surface: the edit takes the point, not the surface, to the target",
+                          cr.model_miss_voxels);
+        } else if (on_model && cr.source_thin) {
+            std::snprintf(text, sizeof text, "the point lies on a feature thinner than a voxel, which the voxmap does not hold; raise the resolution");
+        } else if (on_model && cr.source_miss_voxels > 0.25) {
+            std::snprintf(text, sizeof text,
+                          "the point lies %.2f voxels off the voxelized surface (a sharp tip or edge the voxmap rounds off), and the edit carries that offset along",
+                          cr.source_miss_voxels);
+        } else if (cr.source_miss_voxels > 0.5) {
+            std::snprintf(text, sizeof text, "the point lies %.2f voxels off the surface the edit starts from", cr.source_miss_voxels);
+        } else {
+            continue;
+        }
+        cr.miss_cause = text;
+    }
+}
+
+/// Surface misses of one edit's move constraints against the voxmap it produced.
+void measure_targets(EditReport& er, const std::vector<Constraint>& constraints, const SparseVoxmap& after) {
+    for (std::size_t c = 0; c < constraints.size(); ++c)
+        if (constraints[c].kind == ConstraintKind::move) er.constraints[c].surface_miss_voxels = distance_to_isosurface(after, constraints[c].to, kMissReach);
+}
+
+/// The edits of deform_voxmap; `model` (the input mesh, or null) tells how far the first edit's points lie from it.
+SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report, const TriangleMesh* model) {
+    Progress progress(options.progress, "deform");
+    report.voxel_size = voxmap.voxel_size();
+    report.dims = voxmap.dims();
+    report.volume_before = enclosed_volume(voxmap);
+    // The warp's sums (8 bytes a voxel, in blocks over the band's image) take about three times the voxmap's own.
+    require_memory(3 * voxmap.bytes(), options.voxelize.max_memory_bytes, "warping a voxmap of " + std::to_string(voxmap.bytes() >> 20) + " MiB");
+    const double h = voxmap.voxel_size();
+    for (std::size_t e = 0; e < script.edits.size(); ++e) {
+        const Edit& edit = script.edits[e];
+        const auto& constraints = edit.constraints;
+        const auto& n = voxmap.dims();
+        const Eigen::Vector3d lo = voxmap.origin(), hi = voxmap.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
+        check_near(constraints, lo, hi, options.far_fraction);
+        EditReport er;
+        er.solver = to_string(edit.solver);
+        er.preserve_volume = edit.preserve_volume;
+        er.volume_before = enclosed_volume(voxmap);
+        const auto sources = measure_sources(constraints, voxmap);
+        auto t = Clock::now();
+        WarpDomain domain = make_domain(std::move(voxmap), script.lattice, options.voxelize.max_memory_bytes); // refilled by the warp below
+        ConstraintSolution solution;
+        if (edit.solver == Solver::rigid) {
+            // One solve, one warp: the rigid answer holds for the whole edit (steps along straight lines would
+            // shorten a bend's chord), and its own energy keeps the map from folding; what folds remains is reported.
+            RigidSolution rs = solve_rigid(domain.lattice, constraints, lattice_material(domain),
+                                           {.rigid = true, .preserve_volume = edit.preserve_volume, .progress = options.progress});
+            er.iterations = rs.iterations;
+            solution = std::move(rs);
+            er.steps = 1;
+        } else {
+            er.steps = plan_steps(domain, edit, options, solution, er.folds_remain, er.iterations);
+        }
+        record(er, solution, constraints, er.steps, h);
+        er.seconds_solve += seconds_since(t);
+        for (std::size_t c = 0; c < constraints.size(); ++c) {
+            std::tie(er.constraints[c].source_miss_voxels, er.constraints[c].source_thin) = sources[c];
+            if (model && e == 0 && constraints[c].kind == ConstraintKind::move)
+                er.constraints[c].model_miss_voxels = distances_to_surface_within({constraints[c].point}, *model, kMissReach * h)[0] / h;
+        }
+        for (int s = 0; s < er.steps; ++s) {
+            if (s > 0) {
+                t = Clock::now();
+                domain = make_domain(std::move(voxmap), script.lattice, options.voxelize.max_memory_bytes);
+                solution = solve_min_norm(domain, step_constraints(constraints, s, er.steps), edit.preserve_volume, options.progress, er.iterations);
+                er.seconds_solve += seconds_since(t);
+            }
+            if (s + 1 == er.steps) {
+                const auto folds = find_folds(solution.lattice);
+                er.folded_regions = int(folds.size());
+                er.folds_remain = !folds.empty();
+            }
+            t = Clock::now();
+            progress.stage("warp edit " + std::to_string(e + 1) + "/" + std::to_string(script.edits.size()) +
+                           (er.steps > 1 ? " step " + std::to_string(s + 1) + "/" + std::to_string(er.steps) : ""));
+            voxmap = warp(std::move(domain), solution.lattice, {.preview = options.preview, .progress = options.progress});
+            report.seconds_warp += seconds_since(t);
+            progress.report(double(s + 1) / er.steps);
+        }
+        report.seconds_solve += er.seconds_solve;
+        er.volume_after = enclosed_volume(voxmap);
+        measure_targets(er, constraints, voxmap);
+        explain_misses(er);
+        report.edits.push_back(std::move(er));
+    }
+    report.volume_after = enclosed_volume(voxmap);
+    return voxmap;
+}
+
+} // namespace deform_internal
+
+using namespace deform_internal;
+
+SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+    return run_edits(std::move(voxmap), script, options, report, nullptr);
+}
+
+TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+    auto t = Clock::now();
+    report.mode = "volume";
+    VoxelizeOptions vo = options.voxelize;
+    vo.progress = options.progress;
+    // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
+    // voxel of surface area, measured on the bunny); the extracted mesh takes less than that.
+    const Voxmap frame = voxelize_frame(mesh, vo);
+    require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)), vo.max_memory_bytes,
+                   "deforming at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
+    SparseVoxmap voxmap = voxelize_sparse(mesh, vo);
+    report.seconds_voxelize = seconds_since(t);
+    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh);
+    t = Clock::now();
+    ExtractOptions eo = options.extract;
+    eo.progress = options.progress;
+    TriangleMesh out = extract(voxmap, eo);
+    if (options.target_faces > 0) out = decimate(out, options.target_faces);
+    report.seconds_extract = seconds_since(t);
+    if (out.face_count() == 0) throw InvalidInput("deform: the deformed volume has no surface left (was the model thinner than a voxel?)");
+    // The last edit's misses against the surface the user gets (decimated or quads included).
+    if (!report.edits.empty()) {
+        EditReport& last = report.edits.back();
+        const auto& constraints = script.edits.back().constraints;
+        const double h = report.voxel_size;
+        for (std::size_t c = 0; c < constraints.size(); ++c)
+            if (constraints[c].kind == ConstraintKind::move) {
+                const double d = distances_to_surface_within({constraints[c].to}, out, kMissReach * h)[0] / h;
+                last.constraints[c].surface_miss_voxels = d;
+            }
+        explain_misses(last);
+    }
+    report.volume_before = enclosed_volume(mesh.quads.empty() ? mesh : mesh.triangulated());
+    report.volume_after = enclosed_volume(out.quads.empty() ? out : out.triangulated());
+    report.output_vertices = out.vertices.size();
+    report.output_faces = out.face_count();
+    return out;
+}
+
+TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+    TriangleMesh out = mesh;
+    report.mode = "vertex";
+    for (std::size_t e = 0; e < script.edits.size(); ++e) {
+        const Edit& edit = script.edits[e];
+        const auto& constraints = edit.constraints;
+        // The same lattice the volume mode builds: over the voxel frame the mesh would be voxelized into.
+        Voxmap frame = voxelize_frame(out, options.voxelize);
+        if (e == 0) report.voxel_size = frame.voxel_size, report.dims = frame.dims, report.volume_before = enclosed_volume(out);
+        const Eigen::Vector3d lo = frame.origin, hi = frame.world(double(frame.dims[0] - 1), double(frame.dims[1] - 1), double(frame.dims[2] - 1));
+        check_near(constraints, lo, hi, options.far_fraction);
+        EditReport er;
+        er.solver = to_string(edit.solver);
+        er.preserve_volume = edit.preserve_volume;
+        const auto t = Clock::now();
+        ConstraintSolution solution;
+        Lattice rest;
+        if (edit.solver == Solver::rigid || edit.preserve_volume) {
+            // Both need the material: voxelize the current shape into its frame.
+            VoxelizeOptions vo = options.voxelize;
+            vo.progress = options.progress;
+            const WarpDomain domain = make_domain(voxelize_sparse(out, vo), script.lattice, options.voxelize.max_memory_bytes);
+            RigidSolution rs = solve_rigid(domain.lattice, constraints, lattice_material(domain),
+                                           {.rigid = edit.solver == Solver::rigid, .preserve_volume = edit.preserve_volume, .progress = options.progress});
+            er.iterations = rs.iterations;
+            solution = std::move(rs);
+            rest = domain.lattice;
+        } else {
+            const WarpDomain domain = make_domain(SparseVoxmap(frame.dims, frame.origin, frame.voxel_size), script.lattice, options.voxelize.max_memory_bytes);
+            // Vertex mode applies the whole edit as one map: moving vertices needs no injective steps.
+            solution = solve_constraints(domain.lattice, constraints);
+            rest = domain.lattice;
+        }
+        er.seconds_solve = seconds_since(t);
+        report.seconds_solve += er.seconds_solve;
+        const auto folds = find_folds(solution.lattice);
+        er.folds_remain = !folds.empty();
+        er.folded_regions = int(folds.size());
+        record(er, solution, constraints, 1, frame.voxel_size);
+        er.volume_before = enclosed_volume(out);
+        for (auto& v : out.vertices) v = solution.lattice.evaluate(rest.parameter_of(v));
+        er.volume_after = enclosed_volume(out);
+        report.edits.push_back(std::move(er));
+    }
+    report.volume_after = enclosed_volume(out);
+    report.output_vertices = out.vertices.size();
+    report.output_faces = out.face_count();
+    return out;
+}
+
+} // namespace voxwarp

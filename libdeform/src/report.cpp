@@ -1,0 +1,103 @@
+// The deform report as JSON (README "Reports") and the warnings a user should read.
+#include <voxwarp/deform.h>
+#include <voxwarp/resources.h>
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+
+namespace voxwarp {
+
+namespace {
+
+double change_percent(double before, double after) { return before != 0 ? 100.0 * (after / before - 1.0) : 0.0; }
+
+/// A distance for JSON: null when unmeasured (< 0) or beyond the measured reach (infinite).
+nlohmann::json distance(double d) { return d >= 0 && std::isfinite(d) ? nlohmann::json(d) : nlohmann::json(nullptr); }
+
+std::string method(const EditReport& e) {
+    if (e.solver == "rigid") return "rigid: ARAP local/global, then Levenberg-Marquardt (Ceres)";
+    if (e.preserve_volume) return "least motion keeping the volume: Levenberg-Marquardt (Ceres)";
+    return e.least_squares ? "weighted least squares (Ceres)" : "minimum-norm pseudoinverse";
+}
+
+} // namespace
+
+std::string report_json(const DeformReport& r, const std::map<std::string, std::string>& fields) {
+    nlohmann::json j;
+    for (const auto& [key, value] : fields) j[key] = value;
+    j["mode"] = r.mode;
+    j["voxel_size"] = r.voxel_size;
+    j["dims"] = {r.dims[0], r.dims[1], r.dims[2]};
+    j["volume_before"] = r.volume_before;
+    j["volume_after"] = r.volume_after;
+    j["volume_change_percent"] = change_percent(r.volume_before, r.volume_after);
+    j["seconds"] = {{"total", r.seconds_total}, {"read", r.seconds_read},       {"voxelize", r.seconds_voxelize}, {"solve", r.seconds_solve},
+                    {"warp", r.seconds_warp},   {"extract", r.seconds_extract}, {"write", r.seconds_write}};
+    j["peak_resident_bytes"] = peak_resident_bytes();
+    j["output_vertices"] = r.output_vertices;
+    j["output_faces"] = r.output_faces;
+    j["edits"] = nlohmann::json::array();
+    for (const auto& e : r.edits) {
+        nlohmann::json je;
+        je["solver"] = e.solver;
+        je["method"] = method(e);
+        je["preserve_volume"] = e.preserve_volume;
+        je["steps"] = e.steps;
+        je["folds_remain"] = e.folds_remain;
+        je["folded_regions"] = e.folded_regions;
+        je["rank"] = e.rank;
+        je["unknowns"] = e.unknowns;
+        je["iterations"] = e.iterations;
+        je["seconds_solve"] = e.seconds_solve;
+        je["volume_before"] = e.volume_before;
+        je["volume_after"] = e.volume_after;
+        je["volume_change_percent"] = change_percent(e.volume_before, e.volume_after);
+        je["constraints"] = nlohmann::json::array();
+        for (const auto& c : e.constraints) {
+            nlohmann::json jc = {{"name", c.name}, {"kind", c.kind}, {"residual", c.residual}, {"residual_voxels", c.residual_voxels}};
+            if (c.kind == "move") {
+                jc["surface_miss_voxels"] = distance(c.surface_miss_voxels);
+                jc["source_miss_voxels"] = distance(c.source_miss_voxels);
+                if (c.model_miss_voxels >= 0) jc["model_miss_voxels"] = distance(c.model_miss_voxels);
+                if (!c.miss_cause.empty()) jc["miss_cause"] = c.miss_cause;
+            }
+            je["constraints"].push_back(jc);
+        }
+        j["edits"].push_back(je);
+    }
+    return j.dump(2) + "\n";
+}
+
+std::vector<std::string> deform_warnings(const DeformReport& r) {
+    std::vector<std::string> out;
+    char line[512];
+    for (const auto& e : r.edits) {
+        for (const auto& c : e.constraints) {
+            if (c.residual_voxels > 0.5) {
+                std::snprintf(line, sizeof line, "%s: the lattice map misses its target by %.3g (%.2f voxels)", c.name.c_str(), c.residual, c.residual_voxels);
+                out.emplace_back(line);
+            }
+            if (c.kind == "move" && c.surface_miss_voxels > 0.5) {
+                if (std::isfinite(c.surface_miss_voxels))
+                    std::snprintf(line, sizeof line, "%s: the surface misses the target by %.2f voxels%s%s", c.name.c_str(), c.surface_miss_voxels,
+                                  c.miss_cause.empty() ? "" : ": ", c.miss_cause.c_str());
+                else
+                    std::snprintf(line, sizeof line, "%s: no surface within 16 voxels of the target%s%s", c.name.c_str(), c.miss_cause.empty() ? "" : ": ",
+                                  c.miss_cause.c_str());
+                out.emplace_back(line);
+            }
+        }
+        if (e.folds_remain && r.mode == "vertex")
+            out.emplace_back("an edit folds the lattice map in " + std::to_string(e.folded_regions) + " region(s); vertex mode applies it as it is (surfaces may cross)");
+        else if (e.folds_remain && e.solver == "rigid")
+            out.emplace_back("a rigid edit folds the lattice map in " + std::to_string(e.folded_regions) +
+                             " region(s) (det J <= 0): the constraints ask for more than a fold-free map gives; move them apart or add pins");
+        else if (e.folds_remain)
+            out.emplace_back("an edit still folds the lattice map after " + std::to_string(e.steps) + " steps; raise --max-steps");
+    }
+    return out;
+}
+
+} // namespace voxwarp
