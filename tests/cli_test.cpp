@@ -159,6 +159,23 @@ TEST_F(Cli, DeformIsByteIdenticalForAnyThreadCount) {
     EXPECT_TRUE(one == bytes(file("two.obj")));
 }
 
+TEST_F(Cli, RigidDeformIsByteIdenticalForAnyThreadCountAndReportsItsSolver) {
+    const std::string args = " deform " + test::data_path("box.obj") + " " + test::data_path("box_twist.json") + " -r 48 -q -o ";
+    ASSERT_EQ(run("--threads 1" + args + file("one.ply") + " --report " + file("report.json")).code, 0);
+    ASSERT_EQ(run("--threads 2" + args + file("two.ply")).code, 0);
+    auto bytes = [](const std::string& path) {
+        std::ifstream in(path, std::ios::binary);
+        std::stringstream text;
+        text << in.rdbuf();
+        return text.str();
+    };
+    EXPECT_GT(bytes(file("one.ply")).size(), 1000u);
+    EXPECT_TRUE(bytes(file("one.ply")) == bytes(file("two.ply")));
+    const std::string report = bytes(file("report.json"));
+    EXPECT_NE(report.find("\"solver\": \"rigid\""), std::string::npos) << report;
+    EXPECT_NE(report.find("\"surface_miss_voxels\""), std::string::npos) << report;
+}
+
 TEST_F(Cli, CompareReportsJson) {
     const Outcome r = run("compare " + test::data_path("bunny.obj") + " " + test::data_path("bunny.obj") + " --json --samples 1000");
     EXPECT_EQ(r.code, 0) << r.err;

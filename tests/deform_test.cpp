@@ -4,6 +4,7 @@
 #include <voxwarp/deform.h>
 
 #include <voxwarp/errors.h>
+#include <voxwarp/extract.h>
 #include <voxwarp/mesh_io.h>
 #include <voxwarp/surface_distance.h>
 
@@ -110,6 +111,10 @@ TEST(EditFile, MalformedScriptsNameThePathAndWhatWasExpected) {
         {R"({"lattice": {"placement": "bent"}, "edits": [{"constraints": [{"pin": [0, 0, 0]}]}]})", "lattice.placement: expected \"uniform\" or \"clamped\""},
         {R"({"lattice": {"padding": "wide"}, "edits": [{"constraints": [{"pin": [0, 0, 0]}]}]})", "lattice.padding: expected a number"},
         {R"({"edits": [{"constraints": [{"move": [0, 0, 1e999], "to": [1, 1, 1]}]}]})", "not valid JSON"},
+        {R"({"edits": [{"constraints": [{"pin": [0, 0, 0]}], "solver": "arap"}]})", "edits[0].solver: expected \"min-norm\" or \"rigid\", got \"arap\""},
+        {R"({"edits": [{"constraints": [{"pin": [0, 0, 0]}], "solver": 1}]})", "edits[0].solver: expected \"min-norm\" or \"rigid\""},
+        {R"({"edits": [{"constraints": [{"pin": [0, 0, 0]}], "preserve_volume": "yes"}]})", "edits[0].preserve_volume: expected true or false"},
+        {R"({"edits": [{"constraints": [{"pin": [0, 0, 0]}], "solvr": "rigid"}]})", "edits[0].solvr: unknown field"},
     };
     for (const auto& [text, expected] : cases) {
         try {
@@ -121,6 +126,60 @@ TEST(EditFile, MalformedScriptsNameThePathAndWhatWasExpected) {
             EXPECT_NE(message.find(expected), std::string::npos) << "message: " << message << "\nexpected to contain: " << expected;
         }
     }
+}
+
+TEST(EditFile, SolverAndVolumeArePerEdit) {
+    const EditScript s = parse_edit_script(
+        R"({"edits": [{"constraints": [{"pin": [0, 0, 0]}], "solver": "rigid", "preserve_volume": true}, {"constraints": [{"pin": [0, 0, 0]}]}]})", "edit.json");
+    ASSERT_EQ(s.edits.size(), 2u);
+    EXPECT_EQ(s.edits[0].solver, Solver::rigid);
+    EXPECT_TRUE(s.edits[0].preserve_volume);
+    EXPECT_EQ(s.edits[1].solver, Solver::min_norm); // the paper's solve stays the default
+    EXPECT_FALSE(s.edits[1].preserve_volume);
+}
+
+TEST(Deform, SurfaceMissesAreMeasuredAgainstTheSurfaceEachEditLeft) {
+    // Two edits on a sphere; the report's misses must equal distances measured independently (CGAL's AABB tree)
+    // to the output mesh (last edit) and to the full extraction of the first edit's voxmap.
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 4);
+    EditScript script;
+    script.edits.push_back({{move({1, 0, 0}, {1.3, 0.05, 0}), pin({-1, 0, 0})}});
+    script.edits.push_back({{move({0, 1, 0}, {0, 1.25, 0.1}), pin({0, -1, 0})}, Solver::rigid});
+    DeformOptions options;
+    options.voxelize.resolution = 48;
+    DeformReport report;
+    const TriangleMesh out = deform_mesh(sphere, script, options, report);
+    const double h = report.voxel_size;
+    ASSERT_EQ(report.edits.size(), 2u);
+    const auto& last = report.edits[1].constraints[0];
+    EXPECT_NEAR(last.surface_miss_voxels, distances_to_surface({{0, 1.25, 0.1}}, out)[0] / h, 1e-6);
+    // The first edit alone, extracted whole.
+    EditScript first;
+    first.edits = {script.edits[0]};
+    DeformReport first_report;
+    const SparseVoxmap after_first = deform_voxmap(voxelize_sparse(sphere, options.voxelize), first, options, first_report);
+    const TriangleMesh first_surface = extract(after_first);
+    EXPECT_NEAR(report.edits[0].constraints[0].surface_miss_voxels, distances_to_surface({{1.3, 0.05, 0}}, first_surface)[0] / h, 1e-6);
+    EXPECT_NEAR(report.edits[0].constraints[0].model_miss_voxels, distances_to_surface({{1, 0, 0}}, sphere)[0] / h, 1e-6);
+    EXPECT_LT(report.edits[1].constraints[0].model_miss_voxels, 0); // later edits have no mesh to measure against
+    EXPECT_LT(report.edits[0].constraints[1].surface_miss_voxels, 0); // pins carry none
+    EXPECT_EQ(report.edits[1].solver, "rigid");
+}
+
+TEST(Deform, MissesOffTheModelAreExplained) {
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 4);
+    EditScript script;
+    script.edits.push_back({{move({1.2, 0, 0}, {1.5, 0, 0}, "edits[0].constraints[0]"), pin({-1, 0, 0})}}); // 0.2 off the sphere
+    DeformOptions options;
+    options.voxelize.resolution = 48;
+    DeformReport report;
+    deform_mesh(sphere, script, options, report);
+    const auto& c = report.edits[0].constraints[0];
+    EXPECT_GT(c.surface_miss_voxels, 0.5);
+    EXPECT_NE(c.miss_cause.find("off the model's surface"), std::string::npos) << c.miss_cause;
+    const auto warnings = deform_warnings(report);
+    ASSERT_FALSE(warnings.empty());
+    EXPECT_NE(warnings[0].find("edits[0].constraints[0]: the surface misses the target by"), std::string::npos) << warnings[0];
 }
 
 TEST(EditFile, BundledExamplesParse) {

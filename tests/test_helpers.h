@@ -2,9 +2,11 @@
 /// @brief Shared fixtures: analytic shapes as fine meshes with their exact distance functions, data paths.
 #pragma once
 
+#include <voxwarp/edit_file.h>
 #include <voxwarp/triangle_mesh.h>
 
 #include <cmath>
+#include <functional>
 #include <map>
 #include <numbers>
 #include <string>
@@ -105,5 +107,59 @@ inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& h
         }
     return m;
 }
+
+using Map = std::function<Eigen::Vector3d(const Eigen::Vector3d&)>;
+
+/// A box of length `length` along x (centred on the origin) and cross-section `width` x `width`.
+struct Bar {
+    double length, width;
+    Eigen::Vector3d lo() const { return {-length / 2, -width / 2, -width / 2}; }
+    Eigen::Vector3d hi() const { return {length / 2, width / 2, width / 2}; }
+    /// The bar bent by `angle` into a circular arc in the x-y plane, towards +y, its centre line keeping its
+    /// length, cross-sections staying planar and square to it; the end x = -length/2 stays put.
+    Map bend(double angle) const {
+        const double R = length / angle, L = length;
+        return [=](const Eigen::Vector3d& p) {
+            const double theta = (p.x() + L / 2) / R;
+            return Eigen::Vector3d(-L / 2 + (R - p.y()) * std::sin(theta), R - (R - p.y()) * std::cos(theta), p.z());
+        };
+    }
+    /// The bar twisted about its axis: cross-section x turned by angle * (x + length/2) / length.
+    Map twist(double angle) const {
+        const double L = length;
+        return [=](const Eigen::Vector3d& p) {
+            const double theta = angle * (p.x() + L / 2) / L;
+            return Eigen::Vector3d(p.x(), p.y() * std::cos(theta) - p.z() * std::sin(theta), p.y() * std::sin(theta) + p.z() * std::cos(theta));
+        };
+    }
+    /// Pins at the corners and centre of the end x = -length/2, moves of the other end's corners and centre to
+    /// where `map` takes them.
+    /// (Constraints named as an edit file would name them.)
+    Edit end_constraints(const Map& map, Solver solver) const {
+        Edit edit;
+        edit.solver = solver;
+        int id = 0;
+        for (double x : {-length / 2, length / 2})
+            for (const Eigen::Vector3d& yz : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0, -1, -1), Eigen::Vector3d(0, 1, -1), Eigen::Vector3d(0, 1, 1),
+                                             Eigen::Vector3d(0, -1, 1)}) {
+                Constraint c;
+                c.point = Eigen::Vector3d(x, 0, 0) + yz * (width / 2);
+                c.name = "edits[0].constraints[" + std::to_string(id++) + "]";
+                if (x < 0) {
+                    c.kind = ConstraintKind::pin, c.to = c.point;
+                } else {
+                    c.kind = ConstraintKind::move, c.to = map(c.point);
+                }
+                edit.constraints.push_back(c);
+            }
+        return edit;
+    }
+    /// The exact answer: a finely tessellated box mapped through `map`.
+    TriangleMesh exact(const Map& map, int n) const {
+        TriangleMesh m = box_mesh(lo(), hi(), n);
+        for (auto& v : m.vertices) v = map(v);
+        return m;
+    }
+};
 
 } // namespace voxwarp::test

@@ -101,12 +101,12 @@ CellIntegrals integrate_cell(const Lattice& rest, int x, int y, int z, int q) {
 /// The rotation nearest to A (its polar factor), by Mueller, Bender, Chentanez & Macklin's iteration (2016),
 /// started from `q` (the previous answer): one or two steps when A changes a little.
 Eigen::Quaterniond extract_rotation(const Eigen::Matrix3d& A, Eigen::Quaterniond q) {
-    for (int it = 0; it < 16; ++it) {
+    for (int it = 0; it < 10; ++it) {
         const Eigen::Matrix3d R = q.toRotationMatrix();
         const Eigen::Vector3d omega = (R.col(0).cross(A.col(0)) + R.col(1).cross(A.col(1)) + R.col(2).cross(A.col(2))) /
                                       (std::abs(R.col(0).dot(A.col(0)) + R.col(1).dot(A.col(1)) + R.col(2).dot(A.col(2))) + 1e-12);
         const double w = omega.squaredNorm();
-        if (!(w > 1e-18)) break;
+        if (!(w > 1e-14)) break; // 1e-7 radians: the outer iterations refine the rest
         // q <- exp(omega / 2) q, the exponential taken to second order (exact enough for a step of an iteration).
         const Eigen::Vector3d half = 0.5 * (w > 1.0 ? omega / std::sqrt(w) : omega);
         const Eigen::Quaterniond dq(1.0 - 0.5 * half.squaredNorm(), half.x(), half.y(), half.z());
@@ -116,15 +116,16 @@ Eigen::Quaterniond extract_rotation(const Eigen::Matrix3d& A, Eigen::Quaterniond
     return q;
 }
 
-/// A matrix near F with determinant 1: F's signed singular values moved onto s1 s2 s3 = 1 (Gauss-Newton steps
-/// along the constraint's gradient, as in Projective Dynamics' volume projection).
+/// A matrix near F with determinant 1: F's singular values moved onto s1 s2 s3 = 1 (Gauss-Newton steps along the
+/// constraint's gradient, as in Projective Dynamics' volume projection), its rotations kept proper (an inverted F
+/// is mapped to its unfolded neighbour).
 Eigen::Matrix3d unit_determinant(const Eigen::Matrix3d& F) {
-    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd;
+    svd.compute(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
     Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
-    Eigen::Vector3d sigma = svd.singularValues();
-    if (U.determinant() < 0) U.col(2) = -U.col(2), sigma[2] = -sigma[2];
-    if (V.determinant() < 0) V.col(2) = -V.col(2), sigma[2] = -sigma[2];
-    Eigen::Vector3d d = sigma.cwiseAbs().cwiseMax(1e-3);
+    if (U.determinant() < 0) U.col(2) *= -1.0;
+    if (V.determinant() < 0) V.col(2) *= -1.0;
+    Eigen::Vector3d d = (U.transpose() * F * V).diagonal().cwiseAbs().cwiseMax(1e-3);
     for (int it = 0; it < 20; ++it) {
         const double C = d.prod() - 1.0;
         if (std::abs(C) < 1e-12) break;
@@ -228,7 +229,7 @@ void extend_rigidly(const Lattice& rest, const std::vector<int>& group, const st
     A.setFromTriplets(entries.begin(), entries.end());
     const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(A);
     if (ldlt.info() != Eigen::Success) return; // every free point already follows a solved neighbour rigidly
-    for (int it = 0; it < 10; ++it) {
+    for (int it = 0; it < 5; ++it) {
         std::vector<Eigen::Matrix3d> star(static_cast<std::size_t>(g), Eigen::Matrix3d::Zero());
         for (const auto& [a, b] : pairs) {
             const Eigen::Vector3d e = P0[std::size_t(b)] - P0[std::size_t(a)];
@@ -249,6 +250,43 @@ void extend_rigidly(const Lattice& rest, const std::vector<int>& group, const st
         for (int k = 0; k < f; ++k) P[std::size_t(free[std::size_t(k)])] = x.row(k).transpose();
     }
 }
+
+/// The baseline's edge residual: r = s (P_h - P_g - R_g e), R_g a unit quaternion (Eigen's x, y, z, w order).
+struct EdgeResidual {
+    Eigen::Vector3d e;
+    double s;
+    template <class T>
+    bool operator()(const T* pg, const T* ph, const T* q, T* r) const {
+        const Eigen::Map<const Eigen::Quaternion<T>> rotation(q);
+        const Eigen::Matrix<T, 3, 1> re = rotation * e.cast<T>();
+        for (int a = 0; a < 3; ++a) r[a] = T(s) * (ph[a] - pg[a] - re[a]);
+        return true;
+    }
+};
+
+/// r = s (sum_k w_k P_k - t): a point constraint as three residuals.
+class RowResidual final : public ceres::CostFunction {
+public:
+    RowResidual(std::vector<double> w, const Eigen::Vector3d& t, double s) : w_(std::move(w)), t_(t), s_(s) {
+        set_num_residuals(3);
+        for (std::size_t k = 0; k < w_.size(); ++k) mutable_parameter_block_sizes()->push_back(3);
+    }
+    bool Evaluate(double const* const* p, double* r, double** jac) const override {
+        Eigen::Vector3d sum = -t_;
+        for (std::size_t k = 0; k < w_.size(); ++k) sum += w_[k] * Eigen::Map<const Eigen::Vector3d>(p[k]);
+        Eigen::Map<Eigen::Vector3d> residual(r);
+        residual = s_ * sum;
+        if (jac)
+            for (std::size_t k = 0; k < w_.size(); ++k)
+                if (jac[k]) Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>{jac[k]} = s_ * w_[k] * Eigen::Matrix3d::Identity();
+        return true;
+    }
+
+private:
+    std::vector<double> w_;
+    Eigen::Vector3d t_;
+    double s_;
+};
 
 } // namespace rigid_internal
 
@@ -561,31 +599,43 @@ RigidSolution solve_rigid(const Lattice& rest, const std::vector<Constraint>& co
     };
     double volume = 1;
     Rows volume_gradient = Rows::Zero(u, 3);
-    std::vector<Eigen::Matrix3d> cell_cofactor(cells.size());
-    std::vector<double> cell_det(cells.size(), 1.0);
+    // Cells are handled in fixed chunks, each summing into a buffer of its own, the buffers then added in order:
+    // parallel, yet the same sums for any thread count.
+    constexpr std::size_t kChunk = 64;
+    const std::size_t chunks = (cells.size() + kChunk - 1) / kChunk;
+    std::vector<Rows> chunk_b(chunks, Rows::Zero(u, 3)), chunk_v(chunks, Rows::Zero(u, 3));
+    std::vector<double> chunk_volume(chunks, 0.0);
+    Rows b_cells = Rows::Zero(u, 3);
+    // Local step: the nearest rotation (and unit-determinant matrix) to every cell's mean Jacobian, and to every
+    // unknown's star of lattice edges; with them, the cells' part of the global step's right side, and the volume
+    // and its gradient (d det F / d P_k = cof(F) g_k).
     auto local_step = [&] {
-        // The nearest rotation (and unit-determinant matrix) to every cell's mean Jacobian, and to every unknown's
-        // star of lattice edges. Independent per cell: parallel, and the same for any thread count.
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 64), [&](const auto& range) {
-            for (std::size_t c = range.begin(); c != range.end(); ++c) {
-                const Eigen::Matrix3d F = jacobian(cells[c]);
+        tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t chunk) {
+            Rows& bc = chunk_b[chunk];
+            Rows& vc = chunk_v[chunk];
+            bc.setZero(), vc.setZero();
+            double vol = 0;
+            for (std::size_t c = chunk * kChunk; c < std::min(cells.size(), (chunk + 1) * kChunk); ++c) {
+                const Cell& cell = cells[c];
+                const Eigen::Matrix3d F = jacobian(cell);
                 Eigen::Matrix3d T = Eigen::Matrix3d::Zero();
                 if (options.rigid) T += w_rigid * (cell_rotation[c] = extract_rotation(F, cell_rotation[c])).toRotationMatrix();
                 if (options.preserve_volume) T += w_volume * unit_determinant(F);
                 cell_target[c] = T / w_cell;
-                cell_det[c] = F.determinant();
-                cell_cofactor[c].col(0) = F.col(1).cross(F.col(2)), cell_cofactor[c].col(1) = F.col(2).cross(F.col(0)),
-                                      cell_cofactor[c].col(2) = F.col(0).cross(F.col(1));
+                Eigen::Matrix3d cofactor;
+                cofactor.col(0) = F.col(1).cross(F.col(2)), cofactor.col(1) = F.col(2).cross(F.col(0)), cofactor.col(2) = F.col(0).cross(F.col(1));
+                vol += cell.a * F.col(0).dot(cofactor.col(0));
+                const Eigen::Matrix3d Tw = (w_cell * cell.a) * cell_target[c], Cw = cell.a * cofactor;
+                for (std::size_t k = 0; k < cell.unknowns.size(); ++k) {
+                    bc.row(cell.unknowns[k]) += (Tw * cell.gradient[k]).transpose();
+                    vc.row(cell.unknowns[k]) += (Cw * cell.gradient[k]).transpose();
+                }
             }
+            chunk_volume[chunk] = vol;
         });
         volume = 0;
-        volume_gradient.setZero();
-        for (std::size_t c = 0; c < cells.size(); ++c) {
-            volume += cells[c].a * cell_det[c];
-            // d det F / d P_k = cof(F) g_k
-            for (std::size_t k = 0; k < cells[c].unknowns.size(); ++k)
-                volume_gradient.row(cells[c].unknowns[k]) += cells[c].a * (cell_cofactor[c] * cells[c].gradient[k]).transpose();
-        }
+        b_cells.setZero(), volume_gradient.setZero();
+        for (std::size_t chunk = 0; chunk < chunks; ++chunk) volume += chunk_volume[chunk], b_cells += chunk_b[chunk], volume_gradient += chunk_v[chunk];
         if (!options.rigid) return;
         std::vector<Eigen::Matrix3d> star(std::size_t(u), Eigen::Matrix3d::Zero());
         for (std::size_t e = 0; e < edges.size(); ++e) {
@@ -609,11 +659,7 @@ RigidSolution solve_rigid(const Lattice& rest, const std::vector<Constraint>& co
     int iteration = 0;
     for (; iteration < options.max_iterations; ++iteration) {
         local_step();
-        Rows b = b_fixed;
-        for (std::size_t c = 0; c < cells.size(); ++c) {
-            const double w = w_cell * cells[c].a;
-            for (std::size_t k = 0; k < cells[c].unknowns.size(); ++k) b.row(cells[c].unknowns[k]) += w * (cell_target[c] * cells[c].gradient[k]).transpose();
-        }
+        Rows b = b_fixed + b_cells;
         for (std::size_t e = 0; e < edges.size(); ++e) {
             const auto [i, j] = edges[e];
             const double w = w_edge / edge_rest[e].squaredNorm();
@@ -657,23 +703,6 @@ RigidSolution solve_rigid(const Lattice& rest, const std::vector<Constraint>& co
         accelerated = true;
     }
     out.iterations = std::min(iteration + 1, options.max_iterations);
-    // The energy reached, with the cells' whole integrals: |F - T|^2 averaged over a cell is P^T K P - 2 <T, Fbar> + |T|^2.
-    local_step();
-    double energy = 0;
-    for (std::size_t c = 0; c < cells.size(); ++c) {
-        Eigen::Matrix<double, 64, 3> Ps;
-        for (int slot = 0; slot < 64; ++slot) Ps.row(slot) = P.row(cells[c].unknowns[std::size_t(cells[c].slot_unknown[std::size_t(slot)])]);
-        const Eigen::Matrix3d Fbar = jacobian(cells[c]);
-        const double quadratic = (Ps.transpose() * integrals[std::size_t(cells[c].slot_cache)].gram * Ps).trace();
-        energy += w_cell * cells[c].a * (quadratic - 2 * (cell_target[c].transpose() * Fbar).trace() + cell_target[c].squaredNorm());
-    }
-    for (std::size_t e = 0; e < edges.size(); ++e) {
-        const auto [i, j] = edges[e];
-        const Eigen::Vector3d now = (P.row(j) - P.row(i)).transpose();
-        energy += w_edge / edge_rest[e].squaredNorm() *
-                  ((now - node_rotation[std::size_t(i)] * edge_rest[e]).squaredNorm() + (now - node_rotation[std::size_t(j)] * edge_rest[e]).squaredNorm());
-    }
-    out.energy = energy;
 
     // Write back: the solved unknowns; the rest follow as rigidly as they can (rigid) or stay put (min-norm).
     std::vector<Eigen::Vector3d> solved = P0;
@@ -689,6 +718,72 @@ RigidSolution solve_rigid(const Lattice& rest, const std::vector<Constraint>& co
         out.residuals[std::size_t(c)] = (achieved - target[std::size_t(c)]).norm();
     }
     progress.report(1.0);
+    return out;
+}
+
+} // namespace voxwarp
+
+namespace voxwarp {
+
+RigidSolution solve_rigid_graph_ceres(const Lattice& rest, const std::vector<Constraint>& constraints, const LatticeMaterial& material) {
+    const ConstraintRows rows = constraint_rows(rest, constraints);
+    const std::vector<double> point_material = control_point_material(rest, material);
+    const int g = rows.groups, m = int(constraints.size());
+    const auto& group = rows.group;
+    std::vector<Eigen::Vector3d> P0(static_cast<std::size_t>(g));
+    std::vector<double> w(static_cast<std::size_t>(g), 1e-3);
+    for (std::size_t p = 0; p < group.size(); ++p) {
+        P0[std::size_t(group[p])] = rest.rest_points()[p];
+        w[std::size_t(group[p])] = std::max(w[std::size_t(group[p])], point_material[p]);
+    }
+    const double L = rest.spacing().mean();
+    std::vector<double> X(3 * static_cast<std::size_t>(g)), Q(4 * static_cast<std::size_t>(g), 0.0);
+    for (int q = 0; q < g; ++q) {
+        for (int a = 0; a < 3; ++a) X[3 * std::size_t(q) + std::size_t(a)] = P0[std::size_t(q)][a];
+        Q[4 * std::size_t(q) + 3] = 1.0;
+    }
+    ceres::Problem problem;
+    for (int q = 0; q < g; ++q) problem.AddParameterBlock(&X[3 * std::size_t(q)], 3), problem.AddParameterBlock(&Q[4 * std::size_t(q)], 4, new ceres::EigenQuaternionManifold);
+    for (const auto& [a, b] : neighbour_pairs(rest, group))
+        for (const auto& [from, to] : {std::pair{a, b}, std::pair{b, a}}) {
+            const Eigen::Vector3d e = P0[std::size_t(to)] - P0[std::size_t(from)];
+            problem.AddResidualBlock(new ceres::AutoDiffCostFunction<EdgeResidual, 3, 3, 3, 4>(new EdgeResidual{e, std::sqrt(w[std::size_t(from)]) / e.norm()}), nullptr,
+                                     &X[3 * std::size_t(from)], &X[3 * std::size_t(to)], &Q[4 * std::size_t(from)]);
+        }
+    std::vector<std::vector<std::pair<int, double>>> terms(static_cast<std::size_t>(m));
+    std::vector<Eigen::Vector3d> target(static_cast<std::size_t>(m));
+    double scale = 0;
+    for (double x : w) scale += x;
+    for (int c = 0; c < m; ++c) {
+        terms[std::size_t(c)] = merged(rows.terms[std::size_t(c)]);
+        Eigen::Vector3d at_rest = Eigen::Vector3d::Zero();
+        std::vector<double> weights;
+        std::vector<double*> blocks;
+        for (const auto& [q, wq] : terms[std::size_t(c)]) at_rest += wq * P0[std::size_t(q)], weights.push_back(wq), blocks.push_back(&X[3 * std::size_t(q)]);
+        target[std::size_t(c)] = at_rest + rows.D.row(c).transpose();
+        // Every constraint as a stiff penalty (the baseline makes no exact/weighted distinction).
+        problem.AddResidualBlock(new RowResidual(std::move(weights), target[std::size_t(c)], std::sqrt(1e6 * scale) / L), nullptr, blocks);
+    }
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    so.max_num_iterations = 100;
+    so.function_tolerance = 1e-10;
+    so.num_threads = 1;
+    so.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    if (!summary.IsSolutionUsable()) throw SolverFailure("graph ARAP baseline: Ceres failed: " + summary.message);
+    RigidSolution out;
+    out.iterations = int(summary.iterations.size()) - 1;
+    out.unknowns = g;
+    out.least_squares = true;
+    out.lattice = rest;
+    for (std::size_t p = 0; p < group.size(); ++p) out.lattice.points()[p] = Eigen::Map<const Eigen::Vector3d>(&X[3 * std::size_t(group[p])]);
+    for (int c = 0; c < m; ++c) {
+        Eigen::Vector3d achieved = Eigen::Vector3d::Zero();
+        for (const auto& [q, wq] : terms[std::size_t(c)]) achieved += wq * Eigen::Map<const Eigen::Vector3d>(&X[3 * std::size_t(q)]);
+        out.residuals.push_back((achieved - target[std::size_t(c)]).norm());
+    }
     return out;
 }
 
