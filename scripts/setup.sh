@@ -7,7 +7,8 @@ cd "$(dirname "$0")/.."
 packages=(cmake ninja-build g++ pkg-config
   libopenmesh-dev libopenvdb-dev libboost-iostreams-dev libblosc-dev libtbb-dev
   libcgal-dev libceres-dev libeigen3-dev
-  libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev)
+  libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
+  python3 python3-dev pybind11-dev python3-numpy python3-pytest python3-distributed)
 
 missing=()
 for p in "${packages[@]}"; do

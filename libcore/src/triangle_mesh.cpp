@@ -1,3 +1,4 @@
+#include <voxwarp/errors.h>
 #include <voxwarp/triangle_mesh.h>
 
 #include <algorithm>
@@ -6,6 +7,27 @@
 #include <unordered_map>
 
 namespace voxwarp {
+
+void check_mesh(const TriangleMesh& mesh, const std::string& source) {
+    if (mesh.vertices.empty()) throw InvalidInput(source + ": no vertices");
+    if (mesh.face_count() == 0) throw InvalidInput(source + ": no faces");
+    for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
+        if (!mesh.vertices[i].allFinite()) throw InvalidInput(source + ": vertex " + std::to_string(i) + " has a non-finite coordinate");
+    const auto n = std::int64_t(mesh.vertices.size());
+    auto check_face = [&](std::size_t f, const auto& face) {
+        for (auto v : face)
+            if (v < 0 || v >= n)
+                throw InvalidInput(source + ": face " + std::to_string(f) + " refers to vertex " + std::to_string(v) + ", the mesh has " + std::to_string(n) +
+                                   " vertices");
+    };
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f) check_face(f, mesh.triangles[f]);
+    for (std::size_t f = 0; f < mesh.quads.size(); ++f) check_face(mesh.triangles.size() + f, mesh.quads[f]);
+    TriangleMesh storage;
+    for (const auto& t : all_triangles(mesh, storage))
+        if ((mesh.vertices[std::size_t(t[1])] - mesh.vertices[std::size_t(t[0])]).cross(mesh.vertices[std::size_t(t[2])] - mesh.vertices[std::size_t(t[0])]).squaredNorm() > 0)
+            return;
+    throw InvalidInput(source + ": every face has zero area: the mesh encloses nothing");
+}
 
 TriangleMesh TriangleMesh::triangulated() const {
     TriangleMesh out;

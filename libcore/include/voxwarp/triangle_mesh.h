@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace voxwarp {
@@ -54,6 +55,12 @@ struct MeshTopology {
     bool watertight() const { return closed() && manifold() && oriented() && degenerate_faces == 0; }
 };
 MeshTopology topology(const TriangleMesh& mesh);
+
+/// Check a mesh built in memory (from arrays, not read from a file): vertices finite, every face's indices within
+/// the vertex list, at least one face with area. Indices in messages are 0-based, as the arrays'.
+/// @throw InvalidInput whose message starts with `source` and says what is wrong (e.g. "F: face 12 refers to vertex
+///        4001, the mesh has 1839 vertices").
+void check_mesh(const TriangleMesh& mesh, const std::string& source);
 
 /// Signed volume enclosed by a closed, outward-oriented mesh (divergence theorem), world units cubed.
 double enclosed_volume(const TriangleMesh& mesh);

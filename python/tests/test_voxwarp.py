@@ -1,0 +1,216 @@
+# The Python module against the command line and analytic shapes: dtypes and shapes, errors and their messages,
+# cancelling, the GIL, and byte-identical meshes to the CLI for the bundled examples.
+import json
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import voxwarp
+from conftest import box, data, icosphere, run_cli
+
+
+def test_read_mesh_gives_float64_positions_and_int32_triangles():
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    assert V.dtype == np.float64 and V.shape == (1839, 3) and V.flags["C_CONTIGUOUS"]
+    assert F.dtype == np.int32 and F.shape == (3674, 3)
+    assert F.min() == 0 and F.max() == len(V) - 1
+    # The arrays hold the C++ vectors themselves (handed over, not copied): their memory is owned elsewhere.
+    assert not V.flags["OWNDATA"] and V.base is not None
+
+
+def test_write_then_read_round_trips(tmp):
+    V, F = box()
+    for ext in (".obj", ".ply", ".off", ".stl"):
+        path = tmp / ("box" + ext)
+        voxwarp.write_mesh(path, V, F)
+        V2, F2 = voxwarp.read_mesh(str(path))
+        assert len(F2) == 12
+        np.testing.assert_allclose(np.sort(np.unique(V2, axis=0), axis=0), np.sort(V, axis=0), atol=1e-6)
+
+
+def test_other_numeric_dtypes_are_accepted():
+    V, F = box()
+    for v, f in ((V.astype(np.float32), F.astype(np.int64)), (V, F.astype(np.uint32)), (np.asfortranarray(V), F[:, :].copy(order="F"))):
+        vm = voxwarp.voxelize(v, f, resolution=16)
+        assert vm.dims[0] > vm.dims[1]
+
+
+@pytest.mark.parametrize(
+    "V, F, message",
+    [
+        (np.zeros((4, 2)), np.zeros((1, 3), np.int32), "V: expected an array of shape (n, 3), got shape (4, 2)"),
+        (box()[0], box()[1][:, :2], "F: expected an array of shape (m, 3), got shape (12, 2)"),
+        (box()[0], box()[1].astype(np.float64), "F: expected integer vertex indices, got dtype float64"),
+        (np.where(np.arange(24).reshape(8, 3) == 9, np.nan, box()[0]), box()[1], "V: vertex 3 has a non-finite coordinate"),
+        (box()[0], np.vstack([box()[1], [[0, 1, 99]]]).astype(np.int32), "F: face 12 refers to vertex 99, the mesh has 8 vertices"),
+        (box()[0], np.vstack([box()[1], [[0, -1, 2]]]).astype(np.int32), "F: face 12 refers to vertex -1, the mesh has 8 vertices"),
+        (np.zeros((3, 3)), np.array([[0, 1, 2]], np.int32), "V: every face has zero area"),
+        (np.zeros((0, 3)), np.zeros((0, 3), np.int32), "V: no vertices"),
+    ],
+)
+def test_bad_arrays_are_refused_with_the_cli_messages(V, F, message, tmp):
+    for call in (lambda: voxwarp.voxelize(V, F), lambda: voxwarp.write_mesh(tmp / "x.obj", V, F), lambda: voxwarp.deform(V, F, data("bunny_ear.json"))):
+        with pytest.raises(voxwarp.InvalidInput) as e:
+            call()
+        assert message in str(e.value)
+    assert not (tmp / "x.obj").exists()
+
+
+def test_files_fail_as_on_the_command_line(tmp):
+    bad = tmp / "broken.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    with pytest.raises(voxwarp.InvalidInput) as e:
+        voxwarp.read_mesh(bad)
+    cli = run_cli("info", bad)
+    assert cli.returncode == 2 and str(e.value) in cli.stderr
+    with pytest.raises(voxwarp.IOError) as missing:
+        voxwarp.read_mesh(tmp / "missing.obj")
+    assert isinstance(missing.value, OSError) and "no such file" in str(missing.value)
+    edit = tmp / "bad.json"
+    edit.write_text('{"edits": [{"constraints": [{"move": [0, 0, "x"], "to": [0, 1, 0]}]}]}')
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    with pytest.raises(voxwarp.InvalidInput) as e:
+        voxwarp.deform(V, F, str(edit), resolution=32)
+    assert "bad.json: edits[0].constraints[0].move[2]: expected a number" in str(e.value)
+    cli = run_cli("deform", data("bunny.obj"), edit, "-o", tmp / "out.obj", "-q")
+    assert cli.returncode == 2 and str(e.value) in cli.stderr
+
+
+def test_error_classes_form_a_hierarchy():
+    assert issubclass(voxwarp.InvalidInput, voxwarp.Error) and issubclass(voxwarp.InvalidInput, ValueError)
+    assert issubclass(voxwarp.ResourceLimit, voxwarp.Error) and issubclass(voxwarp.ResourceLimit, MemoryError)
+    assert issubclass(voxwarp.IOError, OSError)
+    for cls in (voxwarp.SolverFailure, voxwarp.Cancelled, voxwarp.Error):
+        assert issubclass(cls, RuntimeError)
+
+
+def test_memory_hungry_requests_are_refused_up_front():
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    with pytest.raises(voxwarp.ResourceLimit) as e:
+        voxwarp.voxelize(V, F, resolution=4096, max_memory=0.01)
+    assert "GiB" in str(e.value) or "MiB" in str(e.value)
+
+
+def test_voxmap_density_is_a_view_in_index_order():
+    V, F = icosphere(3, 1.0)
+    vm = voxwarp.voxelize(V, F, voxel_size=0.05)
+    d = vm.density
+    assert d.dtype == np.float32 and d.shape == vm.dims and d.flags["F_CONTIGUOUS"]
+    # density[i, j, k] is voxel (i, j, k), centred at origin + h (i, j, k): the centre voxel is inside.
+    centre = np.round((np.zeros(3) - np.array(vm.origin)) / vm.voxel_size).astype(int)
+    assert d[tuple(centre)] == pytest.approx(1.0)
+    assert d[0, 0, 0] == 0.0
+    volume = vm.enclosed_volume()
+    assert volume == pytest.approx(4 / 3 * np.pi * 0.99, rel=0.03)  # the icosphere's chords cut a little off
+    d[:] = 0  # a view: writing through it empties the voxmap
+    assert vm.enclosed_volume() == 0
+
+
+def test_voxmap_from_numpy_extracts_the_sphere_it_holds():
+    n, h = 40, 0.1
+    i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+    origin = np.array([-2.0, -2.0, -2.0])
+    r = np.sqrt(((origin + h * np.stack([i, j, k], -1)) ** 2).sum(-1))
+    density = np.clip(0.5 - (r - 1.3) / (2 * h), 0, 1)  # the voxelizer's ramp around a sphere of radius 1.3
+    vm = voxwarp.Voxmap(density, origin=origin, voxel_size=h)
+    V, F = voxwarp.extract(vm)
+    assert V.dtype == np.float64 and F.dtype == np.int32
+    assert np.abs(np.linalg.norm(V, axis=1) - 1.3).max() < 0.05 * h * 10  # within half a voxel everywhere
+    assert np.abs(np.linalg.norm(V, axis=1) - 1.3).mean() < 0.05 * h
+    with pytest.raises(voxwarp.InvalidInput, match="density: holds non-finite values"):
+        voxwarp.Voxmap(np.full((4, 4, 4), np.nan))
+    with pytest.raises(voxwarp.InvalidInput, match=r"density: expected an array of shape \(nx, ny, nz\)"):
+        voxwarp.Voxmap(np.zeros((4, 4)))
+
+
+@pytest.mark.parametrize("mesh, edit, resolution", [("bunny.obj", "bunny_ear.json", 64), ("bunny.obj", "bunny_ear.json", 128), ("box.obj", "box_bend.json", 48)])
+def test_deform_is_byte_identical_to_the_cli(mesh, edit, resolution, tmp):
+    cli_out, py_out = tmp / "cli.ply", tmp / "py.ply"
+    r = run_cli("deform", data(mesh), data(edit), "-o", cli_out, "-r", resolution, "-q", "--report", tmp / "cli.json")
+    assert r.returncode == 0, r.stderr
+    V, F = voxwarp.read_mesh(data(mesh))
+    V2, F2, report = voxwarp.deform(V, F, data(edit), resolution=resolution)
+    voxwarp.write_mesh(py_out, V2, F2)
+    assert cli_out.read_bytes() == py_out.read_bytes()
+    cli_report = json.loads((tmp / "cli.json").read_text())
+    assert set(report) == set(cli_report) - {"input", "edits_file", "output"}
+    assert report["edits"][0]["constraints"] == cli_report["edits"][0]["constraints"]
+    # A dict in the edit-file schema is the same edit.
+    with open(data(edit)) as f:
+        V3, F3, _ = voxwarp.deform(V, F, json.load(f), resolution=resolution)
+    assert np.array_equal(V2, V3) and np.array_equal(F2, F3)
+
+
+def test_deform_reports_like_the_cli():
+    V, F = box()
+    V2, F2, report = voxwarp.deform(V, F, data("box_twist.json"), resolution=48)
+    assert report["edits"][0]["solver"] == "rigid"
+    assert abs(report["volume_change_percent"]) < 2
+    moves = [c for c in report["edits"][0]["constraints"] if c["kind"] == "move"]
+    assert moves and all(c["surface_miss_voxels"] is not None for c in moves)
+    assert report["output_faces"] == len(F2) and report["output_vertices"] == len(V2)
+
+
+def test_malformed_edit_dicts_name_their_json_path():
+    V, F = box()
+    with pytest.raises(voxwarp.InvalidInput, match=r'edit: edits\[0\]\.solver: expected "min-norm" or "rigid", got "arap"'):
+        voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0, 0, 0]}], "solver": "arap"}]})
+    with pytest.raises(voxwarp.InvalidInput, match="edit: expected a dict"):
+        voxwarp.deform(V, F, 42)
+
+
+def test_progress_reports_and_cancels():
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    seen = []
+
+    def record(stage, fraction):
+        seen.append((stage, fraction))
+        return True
+
+    voxwarp.deform(V, F, data("bunny_ear.json"), resolution=64, progress=record)
+    assert seen and all(isinstance(s, str) and 0 <= f <= 1 for s, f in seen)
+    with pytest.raises(voxwarp.Cancelled):
+        voxwarp.deform(V, F, data("bunny_ear.json"), resolution=64, progress=lambda s, f: False)
+
+    def boom(stage, fraction):
+        raise ZeroDivisionError("from the callback")
+
+    with pytest.raises(ZeroDivisionError, match="from the callback"):
+        voxwarp.voxelize(V, F, resolution=64, progress=boom)
+
+
+def test_ctrl_c_cancels_a_long_call():
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+    start = time.perf_counter()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        voxwarp.deform(V, F, data("bunny_ear.json"), resolution=512)
+    assert time.perf_counter() - start < 5  # the 512 deform alone takes longer; Ctrl-C stopped it
+    timer.join()
+    # Python's own Ctrl-C handling is back afterwards.
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_long_calls_release_the_gil():
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    ticks = [0]
+    stop = threading.Event()
+
+    def count():
+        while not stop.is_set():
+            ticks[0] += 1
+            time.sleep(0.001)
+
+    counter = threading.Thread(target=count)
+    counter.start()
+    before = ticks[0]
+    voxwarp.deform(V, F, data("bunny_ear.json"), resolution=128)
+    during = ticks[0] - before
+    stop.set()
+    counter.join()
+    assert during > 20  # a call holding the GIL would have let the counter run not at all
