@@ -143,6 +143,11 @@ TriangleMesh read_mesh(const std::string& path) {
     if (std::ifstream probe(path, std::ios::binary); !probe) throw IOError(path + ": cannot open for reading");
     const auto file_size = fs::file_size(path, ec);
     if (file_size == 0) throw InvalidInput(path + ": file is empty");
+    if (TriangleMesh direct; read_mesh_directly(path, lower_extension(path), file_size, direct)) {
+        if (direct.vertices.empty()) throw InvalidInput(path + ": no vertices");
+        if (direct.triangles.empty()) throw InvalidInput(path + ": no faces");
+        return direct;
+    }
     validate_before_openmesh(path, lower_extension(path), file_size);
 
     SoupImporter importer;
@@ -171,6 +176,16 @@ void write_mesh(const TriangleMesh& mesh, const std::string& path) {
     static QuietOpenMesh quiet;
     if (!is_mesh_path(path))
         throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
+    if (lower_extension(path) != ".om") {
+        const auto chunks = encode_mesh_chunks(mesh, lower_extension(path));
+        write_atomically(path, [&](const std::string& tmp) {
+            std::ofstream out(tmp, std::ios::binary);
+            for (const auto& c : chunks) out.write(c.data(), std::streamsize(c.size()));
+            out.close();
+            if (!out) throw IOError(path + ": writing the mesh failed");
+        });
+        return;
+    }
     OutputMesh om;
     om.reserve(mesh.vertices.size(), 3 * mesh.face_count() / 2, mesh.face_count());
     std::vector<OutputMesh::VertexHandle> handles;

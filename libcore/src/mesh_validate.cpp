@@ -14,9 +14,6 @@
 
 namespace voxwarp::mesh_io_internal {
 
-namespace {
-
-/// The first 64 KiB of a file: enough for any header.
 std::string read_head(const std::string& path, std::uintmax_t file_size) {
     std::ifstream in(path, std::ios::binary);
     std::string head(std::size_t(std::min<std::uintmax_t>(file_size, 65536)), '\0');
@@ -24,6 +21,8 @@ std::string read_head(const std::string& path, std::uintmax_t file_size) {
     head.resize(std::size_t(in.gcount()));
     return head;
 }
+
+namespace {
 
 /// Header counts that need more bytes than the file holds: refused before a reader loops over (or reserves
 /// for) a billion vertices. Minimum record sizes: ASCII "0 0 0\n" is 6 bytes a vertex, "3 0 1 2\n" 8 bytes a
@@ -100,7 +99,7 @@ void validate_stl(const std::string& path, const std::string& head, std::uintmax
                            " bytes) but the file holds " + std::to_string(file_size) + " bytes");
 }
 
-void validate_off(const std::string& path, const std::string& head, std::uintmax_t file_size) {
+void validate_off(const std::string& path, const std::string& head, std::uintmax_t file_size, bool body) {
     std::istringstream text(head);
     std::string line;
     // Header: a keyword ([ST][C][N][4][n]OFF, optionally followed by BINARY), then "#vertices #faces #edges"
@@ -137,7 +136,7 @@ void validate_off(const std::string& path, const std::string& head, std::uintmax
         throw InvalidInput(path + ": OFF header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) + " faces: nothing to read");
     const std::uint64_t needed = binary ? 12 * std::uint64_t(nv) + 16 * std::uint64_t(nf) : 6 * std::uint64_t(nv) + 8 * std::uint64_t(nf);
     if (needed > file_size) refuse_counts(path, std::uint64_t(nv), std::uint64_t(nf), needed, file_size);
-    if (binary) return;
+    if (binary || !body) return;
     // ASCII body: OpenMesh reads a face's vertex count as unsigned, so "-3 0 1 2" becomes four billion
     // vertices (found by fuzzing). Check every vertex and face line against the header first.
     std::ifstream off(path);
