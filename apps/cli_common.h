@@ -47,5 +47,7 @@ void add_info(CLI::App& app, Global& global, Action& action);
 void add_deform(CLI::App& app, Global& global, Action& action);
 void add_warp(CLI::App& app, Global& global, Action& action);
 void add_compare(CLI::App& app, Global& global, Action& action);
+void add_render(CLI::App& app, Global& global, Action& action);
+void add_edit(CLI::App& app, Global& global, Action& action);
 
 } // namespace voxwarp::cli

@@ -1,4 +1,5 @@
 #include "cli_common.h"
+#include "web.h"
 #include <voxwarp/deform.h>
 
 #include <voxwarp/atomic_file.h>
@@ -9,6 +10,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 
@@ -17,7 +19,7 @@ namespace voxwarp::cli {
 namespace {
 
 struct DeformArgs {
-    std::string input, edits, output, report, mode = "volume";
+    std::string input, edits, output, report, png, mode = "volume";
     DeformOptions options;
     double max_memory_gib = 0;
 };
@@ -81,6 +83,7 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
         ->capture_default_str();
     cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
+    cmd->add_option("--png", a->png, "Also write a before / after picture (voxwarp render's, headless Chromium)");
     cmd->add_option("--faces", a->options.target_faces, "Decimate the output to about this many triangles (CGAL edge collapse)")
         ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40))
         ->excludes(quads);
@@ -88,6 +91,7 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
         action = [a, &global] {
             const auto start = Clock::now();
             if (!is_mesh_path(a->output)) throw InvalidInput(a->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
+            if (!a->png.empty() && std::filesystem::path(a->png).extension() != ".png") throw InvalidInput(a->png + ": expected a .png picture");
             a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
             a->options.progress = stderr_progress(global);
             const EditScript script = read_edit_file(a->edits);
@@ -103,6 +107,10 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
             report.seconds_write = seconds_since(t);
             finish(global, *a, report, start);
             note(global, "wrote " + a->output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces");
+            if (!a->png.empty()) {
+                render_png({mesh, out}, {"before", "after"}, {}, a->png);
+                note(global, "wrote " + a->png);
+            }
         };
     });
 }

@@ -62,6 +62,8 @@ int main(int argc, char** argv) {
     add_deform(app, global, action);
     add_warp(app, global, action);
     add_compare(app, global, action);
+    add_render(app, global, action);
+    add_edit(app, global, action);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

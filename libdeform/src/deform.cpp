@@ -247,20 +247,24 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
     return run_edits(std::move(voxmap), script, options, report, nullptr);
 }
 
-TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
-    auto t = Clock::now();
-    report.mode = "volume";
-    VoxelizeOptions vo = options.voxelize;
-    vo.progress = options.progress;
+namespace deform_internal {
+
+// Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization.
+SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress) {
+    VoxelizeOptions vo = options;
+    vo.progress = progress;
     // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
     // voxel of surface area, measured on the bunny); the extracted mesh takes less than that.
     const Voxmap frame = voxelize_frame(mesh, vo);
     require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)), vo.max_memory_bytes,
                    "deforming at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
-    SparseVoxmap voxmap = voxelize_sparse(mesh, vo);
-    report.seconds_voxelize = seconds_since(t);
+    return voxelize_sparse(mesh, vo);
+}
+
+TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+    report.mode = "volume";
     voxmap = run_edits(std::move(voxmap), script, options, report, &mesh);
-    t = Clock::now();
+    auto t = Clock::now();
     ExtractOptions eo = options.extract;
     eo.progress = options.progress;
     TriangleMesh out = extract(voxmap, eo);
@@ -284,6 +288,15 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     report.output_vertices = out.vertices.size();
     report.output_faces = out.face_count();
     return out;
+}
+
+} // namespace deform_internal
+
+TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+    const auto t = Clock::now();
+    SparseVoxmap voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress);
+    report.seconds_voxelize = seconds_since(t);
+    return deform_voxelized(mesh, std::move(voxmap), script, options, report);
 }
 
 TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {

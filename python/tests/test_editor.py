@@ -1,0 +1,261 @@
+# The editor in a real browser (Debian's chromium driven through chromedriver by selenium): click the model,
+# drag the handle, check the shown mesh and the saved edit file against the CLI; and the server against 200 bad
+# requests. Frame rate of the live drag is printed (the README quotes it).
+import base64
+import io
+import json
+import os
+import re
+import socket
+import subprocess
+import threading
+import time
+import urllib.error
+import urllib.request
+
+import pytest
+
+import voxwarp
+from conftest import CLI, data, run_cli
+
+selenium = pytest.importorskip("selenium")
+from selenium import webdriver  # noqa: E402
+from selenium.webdriver.chrome.service import Service  # noqa: E402
+from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
+
+CHROMEDRIVER = "/usr/bin/chromedriver"
+
+
+class Server:
+    def __init__(self, *args):
+        self.process = subprocess.Popen([CLI, "edit", *map(str, args), "--no-browser", "--port", "0", "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = self.process.stdout.readline()
+        match = re.search(r"at (http://127\.0\.0\.1:(\d+)/)", line)
+        assert match, line + self.process.stderr.read()
+        self.url, self.port = match.group(1), int(match.group(2))
+
+    def post(self, path, body, timeout=120):
+        request = urllib.request.Request(self.url.rstrip("/") + path, data=body if isinstance(body, bytes) else body.encode(), method="POST")
+        try:
+            with urllib.request.urlopen(request, timeout=timeout) as r:
+                return r.status, r.read(), dict(r.headers)
+        except urllib.error.HTTPError as e:
+            return e.code, e.read(), dict(e.headers)
+
+    def stop(self):
+        self.process.terminate()
+        self.process.wait(timeout=20)
+
+
+@pytest.fixture
+def server():
+    s = Server(data("bunny.obj"), "--resolution", "128")
+    yield s
+    s.stop()
+    assert s.process.returncode == 0, s.process.stderr.read()
+
+
+def browser(width=1280, height=800):
+    options = webdriver.ChromeOptions()
+    options.binary_location = "/usr/bin/chromium"
+    for a in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
+              "--disable-component-update", "--disable-sync", "--disable-quic", "--no-first-run", "--window-size=%d,%d" % (width, height)):
+        options.add_argument(a)
+    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+
+
+def wait(driver, condition, timeout=60):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        value = driver.execute_script("return " + condition)
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError("timed out waiting for " + condition + "; errors: %s" % driver.execute_script("return window.voxwarp && window.voxwarp.errors"))
+
+
+def not_blank(png):
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    pixels = list(image.getdata())
+    background = max(set(pixels[:: max(1, len(pixels) // 5000)]), key=pixels[:: max(1, len(pixels) // 5000)].count)
+    different = sum(1 for p in pixels[::7] if max(abs(a - b) for a, b in zip(p, background)) > 24)
+    return image.size, different / len(pixels[::7]), len(set(pixels[::7]))
+
+
+def test_click_drag_save_and_the_cli_agree(server, tmp_path):
+    driver = browser()
+    try:
+        driver.set_script_timeout(60)
+        driver.get(server.url)
+        wait(driver, "window.voxwarp && window.voxwarp.ready")
+        canvas = driver.find_element("id", "view")
+        w, h = canvas.size["width"], canvas.size["height"]
+
+        def at(x, y):  # ActionChains offsets are from the element's centre
+            return ActionChains(driver).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2))
+
+        # Click the ear: a handle appears there, and the result comes back. The pixel: where one of the ear's
+        # vertices shows, if the ray through it meets the ear.
+        V, _ = voxwarp.read_mesh(data("bunny.obj"))
+        x = y = None
+        for p in V[(V[:, 1] > 8.0) & (V[:, 1] < 9.0)]:
+            px, py = driver.execute_script("return window.voxwarp.screenOf(arguments[0])", p.tolist())
+            hit = driver.execute_script("return window.voxwarp.pick(arguments[0], arguments[1])", px, py)
+            if hit and hit[1] > 7.5:
+                x, y = px, py
+                break
+        assert x is not None
+        version = driver.execute_script("return window.voxwarp.resultVersion")
+        at(x, y).click().perform()
+        assert driver.execute_script("return window.voxwarp.state.current.constraints.length") == 1
+        point = driver.execute_script("return window.voxwarp.state.current.constraints[0].point")
+        assert 7 < point[1] < 10.5, point  # on the ear, not beside it
+        # Pin the body from the panel's Pin tool.
+        driver.find_element("css selector", "input[value=pin]").click()
+        px, py = driver.execute_script("return window.voxwarp.screenOf([-1.5, 2.5, 1.0])")
+        at(px, py).click().perform()
+        assert driver.execute_script("return window.voxwarp.state.current.constraints.length") == 2
+        wait(driver, "window.voxwarp.resultVersion > %d" % version)
+
+        # Drag the ear's handle up and sideways for about two seconds.
+        tx, ty = driver.execute_script("return window.voxwarp.screenOf(window.voxwarp.state.current.constraints[0].to)")
+        chain = at(tx, ty).click_and_hold()
+        for _ in range(24):
+            chain = chain.move_by_offset(3, -4).pause(0.08)
+        chain.release().perform()
+        drag = driver.execute_script("return window.voxwarp.drag")
+        assert drag["updates"] >= 3  # the result followed the drag
+        # The frame rate: WebDriver delivers only a few moves a second here (each action is a round trip), so
+        # the page itself is fed pointer moves every 16 ms, as a mouse would, for two seconds.
+        wait(driver, "window.voxwarp.lastResolution === 128")
+        tx, ty = driver.execute_script("return window.voxwarp.screenOf(window.voxwarp.state.current.constraints[0].to)")
+        drag = driver.execute_async_script(
+            """
+            const [x0, y0, done] = arguments;
+            const canvas = document.getElementById('view'), r = canvas.getBoundingClientRect();
+            const fire = (type, x, y) => canvas.dispatchEvent(new PointerEvent(type, {clientX: r.left + x, clientY: r.top + y, button: 0, pointerId: 7, bubbles: true}));
+            fire('pointerdown', x0, y0);
+            let step = 0;
+            const timer = setInterval(() => {
+              ++step;
+              fire('pointermove', x0 + step * 0.6, y0 - step * 0.8);
+              if (step === 125) { clearInterval(timer); fire('pointerup', x0 + step * 0.6, y0 - step * 0.8); done(window.voxwarp.drag); }
+            }, 16);
+            """, tx, ty)
+        fps = drag["updates"] / max(drag["seconds"], 1e-9)
+        print("\ndrag on the bunny at 128 (previews at 64): %d updates shown in %.2f s: %.1f frames per second" % (drag["updates"], drag["seconds"], fps))
+        assert fps >= 5
+        # The full-resolution result after the drag.
+        wait(driver, "window.voxwarp.lastResolution === 128 && !window.voxwarp.drag.active && window.voxwarp.requests > 0")
+        time.sleep(1.0)
+        wait(driver, "window.voxwarp.lastResolution === 128")
+        target = driver.execute_script("return window.voxwarp.state.current.constraints[0].to")
+        assert target[1] > point[1] + 0.5, (point, target)  # dragged up
+        shown = base64.b64decode(wait(driver, "window.voxwarp.lastPlyBase64()"))
+
+        # The saved edit file deforms to the very mesh shown, through the CLI.
+        edit = tmp_path / "edit.json"
+        edit.write_text(driver.execute_script("return window.voxwarp.editJSON()"))
+        r = run_cli("deform", data("bunny.obj"), edit, "-o", tmp_path / "cli.ply", "-r", 128, "-q")
+        assert r.returncode == 0, r.stderr
+        assert (tmp_path / "cli.ply").read_bytes() == shown
+        model = urllib.request.urlopen(server.url + "api/model").read()
+        assert shown != model
+
+        png = driver.get_screenshot_as_png()
+        (tmp_path / "editor.png").write_bytes(png)
+        size, share, colours = not_blank(png)
+        assert size[0] >= 800 and share > 0.1 and colours > 50, (size, share, colours)
+    finally:
+        driver.quit()
+
+
+def test_server_survives_200_bad_requests(server):
+    good = open(data("bunny_ear.json"), "rb").read()
+    statuses = {}
+
+    def raw(payload, read=True):
+        with socket.create_connection(("127.0.0.1", server.port), timeout=10) as s:
+            s.sendall(payload)
+            if read:
+                s.settimeout(10)
+                try:
+                    return s.recv(200)
+                except socket.timeout:
+                    return b""
+        return b""
+
+    for i in range(200):
+        kind = i % 8
+        if kind == 0:
+            code, body, _ = server.post("/api/deform", b"{ not json")
+            assert code == 400 and json.loads(body)["error"].startswith("request: not valid JSON"), body
+        elif kind == 1:
+            code, body, _ = server.post("/api/deform", '{"edits": [{"constraints": [{"move": [0, 0, "x"], "to": [0, 1, 0]}]}]}')
+            assert code == 400 and "request: edits[0].constraints[0].move[2]" in json.loads(body)["error"], body
+        elif kind == 2:
+            code, body, _ = server.post("/api/deform", b"x" * (17 << 20))
+            assert code == 413, code
+        elif kind == 3:
+            code, body, _ = server.post("/api/nowhere", b"{}")
+            assert code == 404, code
+        elif kind == 4:  # the connection closes in the middle of the headers
+            raw(b"POST /api/deform HTTP/1.1\r\nHost: x\r\nContent-Len", read=False)
+            code = "closed"
+        elif kind == 5:  # ... or of the body
+            raw(b"POST /api/deform HTTP/1.1\r\nHost: x\r\nContent-Length: 1000\r\n\r\n{\"edits\"", read=False)
+            code = "closed"
+        elif kind == 6:
+            code, body, _ = server.post("/api/deform?resolution=99999", good)
+            assert code == 400 and "resolution" in json.loads(body)["error"], body
+        else:
+            reply = raw(b"GARBAGE\r\n\r\n")
+            code = reply[:12].decode(errors="replace")
+        statuses[kind] = code
+    code, body, headers = server.post("/api/deform?resolution=48", good)
+    assert code == 200 and body.startswith(b"ply\nformat binary_little_endian"), (code, body[:100])
+    report = json.loads(headers["X-Voxwarp-Report"])
+    assert report["edits"][0]["constraints"][0]["residual_voxels"] < 1e-6
+    assert server.process.poll() is None
+
+
+def test_a_newer_request_supersedes_the_running_one(server):
+    good = open(data("bunny_ear.json"), "rb").read()
+    results = {}
+
+    def slow():
+        results["slow"] = server.post("/api/deform?resolution=384", good)[0]
+
+    thread = threading.Thread(target=slow)
+    thread.start()
+    time.sleep(0.3)
+    results["fast"] = server.post("/api/deform?resolution=32", good)[0]
+    thread.join()
+    assert results["fast"] == 200
+    assert results["slow"] in (200, 409)  # cancelled in favour of the newer one, or finished first
+
+
+def test_render_writes_a_picture_of_the_meshes(tmp_path):
+    out = tmp_path / "pair.png"
+    r = run_cli("render", data("bunny.obj"), data("box.obj"), "-o", out, "--size", "640x320", "--view", "45,30", "-q")
+    assert r.returncode == 0, r.stderr
+    size, share, colours = not_blank(out.read_bytes())
+    assert size == (640, 320) and share > 0.05 and colours > 30, (size, share, colours)
+    # deform --png: the before / after picture beside the mesh.
+    r = run_cli("deform", data("box.obj"), data("box_twist.json"), "-o", tmp_path / "twist.ply", "-r", 48, "--png", tmp_path / "twist.png", "-q")
+    assert r.returncode == 0, r.stderr
+    size, share, _ = not_blank((tmp_path / "twist.png").read_bytes())
+    assert size == (1200, 600) and share > 0.05
+
+
+def test_render_refuses_clearly(tmp_path):
+    r = run_cli("render", data("bunny.obj"), "-o", tmp_path / "x.png", "--size", "10x10")
+    assert r.returncode == 2 and "--size 10x10" in r.stderr
+    r = run_cli("render", data("bunny.obj"), "-o", tmp_path / "x.jpg")
+    assert r.returncode == 2 and "expected a .png" in r.stderr
+    env = dict(os.environ, VOXWARP_CHROMIUM="/nonexistent/chromium")
+    r = subprocess.run([CLI, "render", data("bunny.obj"), "-o", tmp_path / "x.png"], capture_output=True, text=True, env=env)
+    assert r.returncode == 5 and "chromium" in r.stderr.lower(), r.stderr
+    assert not (tmp_path / "x.png").exists()

@@ -1,0 +1,375 @@
+// The editor page of `voxwarp edit`: handles on the model, live results from POST /api/deform, undo/redo,
+// edit files in and out. window.voxwarp exposes its state to scripts and to the browser test.
+'use strict';
+
+(function () {
+  const canvas = document.getElementById('view');
+  // No multisampling: with software WebGL (SwiftShader) it costs more than the live result can spare.
+  const view = Viewer.create(canvas, canvas.clientWidth || 800, canvas.clientHeight || 600, false);
+  const controls = new THREE.OrbitControls(view.camera, canvas);
+  controls.enableDamping = false;
+  let needsRender = true; // frames are drawn when something changed, not continuously
+  function redraw() { needsRender = true; }
+  controls.addEventListener('change', redraw);
+  const status = document.getElementById('status');
+
+  // ---- State: the committed edits, the current one, undo/redo snapshots. --------------------------------------
+  const state = { lattice: null, edits: [], current: { solver: 'min-norm', preserve_volume: false, constraints: [] } };
+  let selected = -1;
+  const undoStack = [], redoStack = [];
+  const sources = []; // sources[k]: geometry edit k starts from (0: the model)
+  let model = null, fullResolution = 128, modelName = 'model';
+  let lastFullPly = null, lastReport = null;
+
+  const api = {
+    ready: false, resultVersion: 0, lastResolution: 0, requests: 0, errors: [],
+    drag: { active: false, updates: 0, start: 0, seconds: 0 },
+    state: state,
+  };
+  window.voxwarp = api;
+
+  function snapshot() { return JSON.stringify({ state: state, sources: sources.length }); }
+  function commit() { undoStack.push(lastSnapshot); lastSnapshot = snapshot(); redoStack.length = 0; }
+  let lastSnapshot = snapshot();
+  function restore(text) {
+    const s = JSON.parse(text);
+    state.lattice = s.state.lattice; state.edits = s.state.edits; state.current = s.state.current;
+    while (sources.length > s.sources) sources.pop();
+    selected = -1;
+    lastSnapshot = text;
+    syncControls(); rebuildHandles(); showSource(); requestDeform(fullResolution);
+  }
+
+  // ---- The edit script in the edit-file schema. ----------------------------------------------------------------
+  function editObject(e) {
+    return {
+      solver: e.solver, preserve_volume: e.preserve_volume,
+      constraints: e.constraints.map(c => c.kind === 'pin' ? { pin: c.point } : { move: c.point, to: c.to }),
+    };
+  }
+  function script() {
+    const edits = state.edits.map(editObject);
+    if (state.current.constraints.length) edits.push(editObject(state.current));
+    const out = { edits: edits };
+    if (state.lattice) out.lattice = state.lattice;
+    return out;
+  }
+  api.editJSON = function () { return JSON.stringify(script(), null, 2); };
+
+  // ---- Scene objects. ---------------------------------------------------------------------------------------------
+  const sourceMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0x9aa0a8, { transparent: true, opacity: 0.28, depthWrite: false }));
+  const resultMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0xd99a5b));
+  resultMesh.renderOrder = 0; sourceMesh.renderOrder = 1;
+  view.scene.add(resultMesh); view.scene.add(sourceMesh);
+  const handles = new THREE.Group();
+  view.scene.add(handles);
+  let handleRadius = 0.05;
+
+  function ball(colour, radius) {
+    return new THREE.Mesh(new THREE.SphereBufferGeometry(radius, 16, 12), new THREE.MeshStandardMaterial({ color: colour, roughness: 0.4 }));
+  }
+  function rebuildHandles() {
+    while (handles.children.length) handles.remove(handles.children[0]);
+    state.current.constraints.forEach(function (c, i) {
+      const pick = i === selected ? 1.35 : 1;
+      if (c.kind === 'pin') {
+        const b = ball(i === selected ? 0x1d4ed8 : 0x3b82f6, handleRadius * pick);
+        b.position.fromArray(c.point); b.userData = { index: i, role: 'pin' };
+        handles.add(b);
+        return;
+      }
+      const from = ball(0x6b7280, handleRadius * 0.6);
+      from.position.fromArray(c.point); from.userData = { index: i, role: 'point' };
+      const to = ball(i === selected ? 0xea580c : 0xf59e0b, handleRadius * pick);
+      to.position.fromArray(c.to); to.userData = { index: i, role: 'target' };
+      const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints([from.position, to.position]), new THREE.LineBasicMaterial({ color: 0x444444 }));
+      handles.add(from); handles.add(to); handles.add(line);
+    });
+    redraw();
+  }
+  function showSource() {
+    sourceMesh.geometry = sources[state.edits.length] || sources[0];
+    // The shape the edit starts from, as a ghost to pick on (not while dragging: half the triangles to draw).
+    sourceMesh.visible = !api.drag.active && (state.current.constraints.length > 0 || state.edits.length > 0);
+    redraw();
+  }
+  function syncControls() {
+    document.getElementById('solver').value = state.current.solver;
+    document.getElementById('preserve-volume').checked = state.current.preserve_volume;
+    document.getElementById('edits').textContent = state.edits.length ? state.edits.length + ' earlier edit(s), this is edit ' + (state.edits.length + 1) : '';
+  }
+
+  // ---- Deform requests: at most one preview in flight, the newest state wins; a full-resolution request goes out
+  // at once (the server cancels the preview it supersedes) and no queued preview is sent after it.
+  let inFlight = false, pending = 0, issued = 0, lastFull = 0;
+  function requestDeform(resolution) {
+    if (!script().edits.length) { resultMesh.geometry = sources[0]; showSource(); return Promise.resolve(); }
+    const full = resolution === fullResolution;
+    if (full) { lastFull = ++issued; pending = 0; }
+    else if (inFlight) { pending = resolution; return Promise.resolve(); }
+    const id = full ? lastFull : ++issued;
+    inFlight = inFlight || !full;
+    api.requests++;
+    const body = api.editJSON();
+    const started = performance.now();
+    return fetch('/api/deform?resolution=' + resolution, { method: 'POST', body: body, headers: { 'Content-Type': 'application/json' } })
+      .then(async function (response) {
+        if (response.status === 409) return; // superseded: a newer request is on its way
+        if (!response.ok) {
+          const e = await response.json().catch(() => ({ error: response.statusText }));
+          showError(e.error);
+          return;
+        }
+        const buffer = await response.arrayBuffer();
+        if (id < lastFull || (full && body !== api.editJSON())) return; // a later full result is coming
+        const previous = resultMesh.geometry;
+        resultMesh.geometry = Viewer.parsePly(buffer);
+        if (previous !== resultMesh.geometry && sources.indexOf(previous) < 0) previous.dispose();
+        redraw();
+        lastReport = JSON.parse(response.headers.get('X-Voxwarp-Report') || '{}');
+        if (full) lastFullPly = buffer;
+        api.lastResolution = resolution;
+        api.resultVersion++;
+        if (api.drag.active) api.drag.updates++;
+        showReport(lastReport, resolution, performance.now() - started);
+      })
+      .catch(function (e) { showError(String(e)); })
+      .finally(function () {
+        if (full) return;
+        inFlight = false;
+        if (pending) { const r = pending; pending = 0; requestDeform(r); }
+      });
+  }
+  function showError(message) {
+    status.className = 'error';
+    status.textContent = message;
+    api.errors.push(message);
+  }
+  function showReport(report, resolution, ms) {
+    status.className = '';
+    status.textContent = 'resolution ' + resolution + ', ' + report.output_faces + ' faces, ' + Math.round(ms) + ' ms\n' +
+      'volume ' + (report.volume_change_percent >= 0 ? '+' : '') + report.volume_change_percent.toFixed(2) + ' %';
+    const table = document.getElementById('residuals');
+    table.innerHTML = '<tr><td>constraint</td><td>map</td><td>surface</td></tr>';
+    const edit = report.edits && report.edits[report.edits.length - 1];
+    (edit ? edit.constraints : []).forEach(function (c) {
+      const row = table.insertRow();
+      row.insertCell().textContent = c.name.replace(/^edits\[\d+\]\./, '') + ' ' + c.kind;
+      row.insertCell().textContent = c.residual_voxels.toExponential(1);
+      const miss = row.insertCell();
+      miss.textContent = c.surface_miss_voxels == null ? '' : c.surface_miss_voxels.toFixed(2) + ' vox';
+      if (c.surface_miss_voxels > 0.5) { miss.className = 'bad'; miss.title = c.miss_cause || ''; }
+    });
+  }
+
+  // ---- Pointer: pick, add, select, drag. ---------------------------------------------------------------------
+  const raycaster = new THREE.Raycaster();
+  function ndc(event) {
+    const r = canvas.getBoundingClientRect();
+    return new THREE.Vector2(((event.clientX - r.left) / r.width) * 2 - 1, -((event.clientY - r.top) / r.height) * 2 + 1);
+  }
+  let down = null, dragging = null;
+  canvas.addEventListener('pointerdown', function (event) {
+    if (event.button !== 0) return;
+    raycaster.setFromCamera(ndc(event), view.camera);
+    const hit = raycaster.intersectObjects(handles.children.filter(h => h.isMesh))[0];
+    down = { x: event.clientX, y: event.clientY, hit: hit };
+    if (hit && hit.object.userData.role === 'target') {
+      const i = hit.object.userData.index;
+      selected = i;
+      const normal = view.camera.getWorldDirection(new THREE.Vector3());
+      dragging = { index: i, plane: new THREE.Plane().setFromNormalAndCoplanarPoint(normal, hit.object.position), y: event.clientY, moved: false };
+      controls.enabled = false;
+      api.drag = { active: true, updates: 0, start: performance.now(), seconds: 0 };
+      try { canvas.setPointerCapture(event.pointerId); } catch (e) { /* a synthetic pointer has nothing to capture */ }
+      showSource(); rebuildHandles();
+    }
+  });
+  canvas.addEventListener('pointermove', function (event) {
+    if (!dragging) return;
+    const c = state.current.constraints[dragging.index];
+    if (event.shiftKey) { // depth: along the view direction, a model-size fraction per pixel
+      const dir = view.camera.getWorldDirection(new THREE.Vector3());
+      const size = sources[0].boundingSphere.radius;
+      const to = new THREE.Vector3().fromArray(c.to).addScaledVector(dir, (event.clientY - dragging.y) * size / 200);
+      c.to = to.toArray();
+      dragging.plane.setFromNormalAndCoplanarPoint(dir, to);
+    } else {
+      raycaster.setFromCamera(ndc(event), view.camera);
+      const p = new THREE.Vector3();
+      if (!raycaster.ray.intersectPlane(dragging.plane, p)) return;
+      c.to = p.toArray();
+    }
+    dragging.y = event.clientY;
+    dragging.moved = true;
+    rebuildHandles();
+    requestDeform(Math.max(16, Math.round(fullResolution / 2)));
+  });
+  canvas.addEventListener('pointerup', function (event) {
+    if (dragging) {
+      const moved = dragging.moved;
+      dragging = null;
+      controls.enabled = true;
+      api.drag.active = false;
+      api.drag.seconds = (performance.now() - api.drag.start) / 1000;
+      showSource();
+      if (moved) { commit(); requestDeform(fullResolution); }
+      down = null;
+      return;
+    }
+    if (!down || Math.hypot(event.clientX - down.x, event.clientY - down.y) > 4) { down = null; return; } // an orbit
+    if (down.hit) { // select a pin or a move's start
+      selected = down.hit.object.userData.index;
+      rebuildHandles();
+      down = null;
+      return;
+    }
+    down = null;
+    raycaster.setFromCamera(ndc(event), view.camera);
+    const hit = raycaster.intersectObject(sourceMesh.visible ? sourceMesh : resultMesh)[0] || raycaster.intersectObject(resultMesh)[0];
+    if (!hit) return;
+    const point = hit.point.toArray();
+    const tool = document.querySelector('input[name=tool]:checked').value;
+    state.current.constraints.push(tool === 'pin' ? { kind: 'pin', point: point } : { kind: 'move', point: point, to: point.slice() });
+    selected = state.current.constraints.length - 1;
+    commit();
+    showSource(); rebuildHandles();
+    requestDeform(fullResolution);
+  });
+
+  // ---- Buttons and keys. -------------------------------------------------------------------------------------
+  function remove() {
+    if (selected < 0 || selected >= state.current.constraints.length) return;
+    state.current.constraints.splice(selected, 1);
+    selected = -1;
+    commit(); rebuildHandles(); showSource(); requestDeform(fullResolution);
+  }
+  function undo() { if (undoStack.length) { redoStack.push(lastSnapshot); restore(undoStack.pop()); } }
+  function redo() { if (redoStack.length) { undoStack.push(lastSnapshot); restore(redoStack.pop()); } }
+  document.getElementById('delete').onclick = remove;
+  document.getElementById('undo').onclick = undo;
+  document.getElementById('redo').onclick = redo;
+  document.getElementById('solver').onchange = function (e) { state.current.solver = e.target.value; commit(); requestDeform(fullResolution); };
+  document.getElementById('preserve-volume').onchange = function (e) { state.current.preserve_volume = e.target.checked; commit(); requestDeform(fullResolution); };
+  window.addEventListener('keydown', function (e) {
+    if (e.target.tagName === 'SELECT' || e.target.tagName === 'INPUT') return;
+    if (e.key === 'Delete' || e.key === 'Backspace') { remove(); e.preventDefault(); }
+    else if ((e.ctrlKey || e.metaKey) && e.key === 'z' && !e.shiftKey) { undo(); e.preventDefault(); }
+    else if ((e.ctrlKey || e.metaKey) && (e.key === 'y' || (e.key === 'z' && e.shiftKey))) { redo(); e.preventDefault(); }
+  });
+  document.getElementById('next-edit').onclick = async function () {
+    if (!state.current.constraints.length) return;
+    await requestDeform(fullResolution);
+    if (!lastFullPly) return;
+    sources[state.edits.length + 1] = Viewer.parsePly(lastFullPly);
+    state.edits.push(state.current);
+    state.current = { solver: state.current.solver, preserve_volume: state.current.preserve_volume, constraints: [] };
+    selected = -1;
+    commit(); syncControls(); rebuildHandles(); showSource();
+  };
+  function download(name, blob) {
+    const a = document.createElement('a');
+    a.href = URL.createObjectURL(blob); a.download = name;
+    document.body.appendChild(a); a.click(); a.remove();
+  }
+  document.getElementById('save-edit').onclick = function () { download('edit.json', new Blob([api.editJSON() + '\n'], { type: 'application/json' })); };
+  document.getElementById('save-mesh').onclick = function () {
+    if (lastFullPly) download(modelName.replace(/\.[^.]*$/, '') + '_edited.ply', new Blob([lastFullPly], { type: 'application/ply' }));
+  };
+  document.getElementById('load-edit').onchange = async function (e) {
+    const file = e.target.files[0];
+    if (file) await api.loadEdit(await file.text());
+    e.target.value = '';
+  };
+
+  /// Take an edit file's text as the editor's state: its earlier edits' results are computed in turn, so that
+  /// the last edit's handles sit on the shape it starts from.
+  api.loadEdit = async function (text) {
+    let data;
+    try { data = JSON.parse(text); } catch (e) { showError('edit file: not valid JSON: ' + e.message); return; }
+    if (!data || !Array.isArray(data.edits) || !data.edits.length) { showError('edit file: expected {"edits": [...]}'); return; }
+    const toEdit = e => ({
+      solver: e.solver || 'min-norm', preserve_volume: !!e.preserve_volume,
+      constraints: (e.constraints || []).filter(c => c.move || c.pin).map(c => c.pin ? { kind: 'pin', point: c.pin } : { kind: 'move', point: c.move, to: c.to }),
+    });
+    state.lattice = data.lattice || null;
+    state.edits = []; sources.length = 1;
+    const all = data.edits.map(toEdit);
+    for (let k = 0; k + 1 < all.length; ++k) { // the shape each later edit starts from
+      state.current = all[k];
+      await requestDeform(fullResolution);
+      if (!lastFullPly) return;
+      sources[k + 1] = Viewer.parsePly(lastFullPly);
+      state.edits.push(all[k]);
+    }
+    state.current = all[all.length - 1];
+    selected = -1;
+    commit(); syncControls(); rebuildHandles(); showSource();
+    await requestDeform(fullResolution);
+  };
+
+  // ---- Tests and scripts. ------------------------------------------------------------------------------------
+  /// Canvas pixel (relative to the canvas' top-left) of a world point.
+  api.screenOf = function (p) {
+    const v = new THREE.Vector3().fromArray(p).project(view.camera);
+    const r = canvas.getBoundingClientRect();
+    return [(v.x + 1) / 2 * r.width, (1 - v.y) / 2 * r.height];
+  };
+  /// The model point under canvas pixel (x, y), or null.
+  api.pick = function (x, y) {
+    const r = canvas.getBoundingClientRect();
+    raycaster.setFromCamera(new THREE.Vector2(x / r.width * 2 - 1, -(y / r.height) * 2 + 1), view.camera);
+    const hit = raycaster.intersectObject(sourceMesh.visible ? sourceMesh : resultMesh)[0];
+    return hit ? hit.point.toArray() : null;
+  };
+  api.lastPlyBase64 = function () {
+    if (!lastFullPly) return null;
+    const bytes = new Uint8Array(lastFullPly);
+    let s = '';
+    for (let i = 0; i < bytes.length; i += 0x8000) s += String.fromCharCode.apply(null, bytes.subarray(i, i + 0x8000));
+    return btoa(s);
+  };
+  api.report = function () { return lastReport; };
+
+  // ---- Start. ------------------------------------------------------------------------------------------------
+  function resize() {
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    view.renderer.setSize(w, h, false);
+    view.camera.aspect = w / h;
+    view.camera.updateProjectionMatrix();
+    redraw();
+  }
+  window.addEventListener('resize', resize);
+  function frame() {
+    requestAnimationFrame(frame);
+    if (!needsRender) return;
+    needsRender = false;
+    view.lights[0].position.copy(view.camera.position).multiplyScalar(1.5);
+    const t = performance.now();
+    view.renderer.render(view.scene, view.camera);
+    view.renderer.getContext().finish();
+    api.frames = (api.frames || 0) + 1;
+    api.renderMs = performance.now() - t;
+  }
+  (async function start() {
+    const response = await fetch('/api/model');
+    const facts = JSON.parse(response.headers.get('X-Voxwarp-Model') || '{}');
+    fullResolution = facts.resolution || 128;
+    modelName = facts.name || 'model';
+    document.getElementById('model-name').textContent = modelName;
+    model = Viewer.parsePly(await response.arrayBuffer());
+    sources[0] = model;
+    resultMesh.geometry = model;
+    handleRadius = model.boundingSphere.radius * 0.025;
+    resize();
+    const centre = Viewer.frame(view, model.boundingBox, 30, 15, view.camera.aspect);
+    controls.target.copy(centre);
+    controls.update();
+    syncControls(); showSource();
+    status.textContent = modelName + ': ' + facts.vertices + ' vertices, ' + facts.faces + ' faces; full result at resolution ' + fullResolution;
+    frame();
+    const initial = await fetch('/api/edit');
+    if (initial.status === 200) await api.loadEdit(await initial.text());
+    api.ready = true;
+  })().catch(e => showError('loading the model failed: ' + e));
+})();
