@@ -196,6 +196,8 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     const int port = server.bind_to_any_port("127.0.0.1");
     if (port <= 0) throw IOError("render: cannot listen on 127.0.0.1");
     std::thread listener([&] { server.listen_after_bind(); });
+    // stop() only stops a server that has started listening: wait for that first.
+    for (int i = 0; i < 500 && !server.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
     struct Stop { // whatever happens below, the server stops and its thread is joined
         httplib::Server& server;
         std::thread& thread;
