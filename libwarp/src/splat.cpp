@@ -267,9 +267,15 @@ public:
     static void footprint(const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, bool preview, Footprint& fp) {
         for (int i = 0; i < 3; ++i) {
             if (preview) {
-                fp.first[i] = floor_index(centre[i] + 0.5);
-                fp.count[i] = 1;
-                fp.overlap[i][0] = 1.0;
+                // Map and round, with the gaps filled: a voxel lands on the cells around its image's centre with
+                // tent weights reaching half its image box and half a cell beyond (at the identity: its own cell,
+                // weight 1), and cells resolve to their weighted mean. Rounding the centre alone leaves gaps
+                // wherever the map stretches; the row rule then carried an inside voxel across them to the grid's
+                // edge. Overlapping tents make the mean linear between voxel centres, the surface stays put.
+                const double r = 0.5 * (hi[i] - lo[i]) + 0.5;
+                fp.first[i] = std::int64_t(std::ceil(centre[i] - r + 1e-9));
+                fp.count[i] = int(std::clamp<std::int64_t>(std::int64_t(std::floor(centre[i] + r - 1e-9)) - fp.first[i] + 1, 0, 16));
+                for (int q = 0; q < fp.count[i]; ++q) fp.overlap[i][q] = std::max(0.0, 1.0 - std::abs(double(fp.first[i] + q) - centre[i]) / r);
                 continue;
             }
             fp.first[i] = floor_index(lo[i] + 0.5);
@@ -294,7 +300,7 @@ public:
     /// B-spline segment converted per axis), and a splat reaches at most half its Jacobian box beyond its centre,
     /// each Jacobian component being a convex combination of control-point differences over G. Exact for
     /// affine maps up to the splat's extent.
-    Box region_bound(const Lattice& lattice, int a, int b, int c, bool preview) const {
+    Box region_bound(const Lattice& lattice, int a, int b, int c) const {
         Eigen::Vector3d P[4][4][4]; // [k][j][i], target index units
         for (int k = 0; k < 4; ++k)
             for (int j = 0; j < 4; ++j)
@@ -325,7 +331,7 @@ public:
         for (int q = 0; q < 16; ++q) to_bezier(flat + q, 16);                          // along k
         Eigen::Vector3d lo = flat[0], hi = flat[0];
         for (int q = 1; q < 64; ++q) lo = lo.cwiseMin(flat[q]), hi = hi.cwiseMax(flat[q]);
-        if (!preview) lo -= reach, hi += reach;
+        lo -= reach, hi += reach; // the preview rounds the same boxes
         Box box;
         Index3 l, u;
         for (std::size_t i = 0; i < 3; ++i) {
@@ -345,6 +351,7 @@ public:
         Footprint fp;
         for_each_box(lattice, a, b, c, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float density, double mass) {
             footprint(centre, lo, hi, preview, fp);
+            if (fp.count[0] == 0 || fp.count[1] == 0 || fp.count[2] == 0) return; // a preview box between cell centres
             const Index3 last{fp.first[0] + fp.count[0] - 1, fp.first[1] + fp.count[1] - 1, fp.first[2] + fp.count[2] - 1};
             box.include({fp.first[0], fp.first[1], fp.first[2]}, last);
             const std::int64_t x0 = fp.first[0] - origin[0], y0 = fp.first[1] - origin[1], z0 = fp.first[2] - origin[2];
@@ -601,7 +608,7 @@ struct Warp::State {
     void bound_boxes(const std::vector<std::size_t>& regions) {
         for (auto r : regions) {
             const auto [a, b, c] = unpack(r);
-            boxes[r] = splatter->region_bound(lattice, a, b, c, options.preview);
+            boxes[r] = splatter->region_bound(lattice, a, b, c);
         }
     }
 
@@ -675,6 +682,9 @@ struct Warp::State {
                     }
                     const std::int64_t ay = y + target.lo[1] - acc.box.lo[1], az = z + target.lo[2] - acc.box.lo[2];
                     bool inside = false;
+                    // The preview's tents: a cell's weighted mean whatever its weight (the full warp's "one" is a
+                    // whole voxel's coverage).
+                    const std::int32_t one = options.preview ? 1 : std::int32_t(kFixedOne);
                     for (std::int64_t x = 0; x < nx;) { // one accumulator block at a time
                         const std::int64_t ax = x + target.lo[0] - acc.box.lo[0];
                         const std::int64_t end = std::min(nx - 1, x + (BlockAccumulator::kSide - 1 - (ax & 7)));
@@ -683,7 +693,7 @@ struct Warp::State {
                             std::fill(out + x, out + end + 1, inside ? 1.0f : 0.0f);
                         } else {
                             const Cell* cell = cells + BlockAccumulator::offset(ax, ay, az);
-                            for (std::int64_t p = x; p <= end; ++p, ++cell) out[p] = resolve_density(cell->weight, cell->value, std::int32_t(kFixedOne), inside);
+                            for (std::int64_t p = x; p <= end; ++p, ++cell) out[p] = resolve_density(cell->weight, cell->value, one, inside);
                         }
                         x = end + 1;
                     }
