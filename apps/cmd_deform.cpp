@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 
 namespace voxwarp::cli {
@@ -28,7 +29,7 @@ void add_common_options(CLI::App* cmd, DeformArgs& a, bool mesh_input) {
     cmd->add_option("input", a.input, mesh_input ? "Input mesh (.obj .off .ply .stl .om)" : "Input voxmap (.vdb)")->required();
     cmd->add_option("edits", a.edits, "Edit file (JSON; schema in README.md)")->required();
     cmd->add_option("-o,--output", a.output, mesh_input ? "Output mesh (.obj .off .ply .stl .om)" : "Output .vdb")->required();
-    cmd->add_flag("--preview", a.options.preview, "Map-and-round warp (the paper's fast, aliased preview)");
+    cmd->add_flag("--preview", a.options.preview, "Map-and-round warp (the paper's preview: no box filter; with tents to fill stretched gaps it now costs about what the full warp does)");
     cmd->add_option("--max-steps", a.options.max_steps, "Most steps an edit is split into so the lattice map stays injective")
         ->check(CLI::Range(1, 64))
         ->capture_default_str();
@@ -81,6 +82,10 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("--mode", a->mode, "volume (re-polygonized, crease-free) or vertex (classic FFD of the input's vertices, for comparison)")
         ->check(CLI::IsMember({"volume", "vertex"}))
         ->capture_default_str();
+    cmd->add_option("--mesher", a->options.extract.mesher, "mc: marching cubes (smooth, fast); features: sharp edges and corners put back (Extended Marching Cubes; the input's own sharp edges kept)")
+        ->transform(CLI::CheckedTransformer(std::map<std::string, Mesher>{{"features", Mesher::features}, {"mc", Mesher::marching_cubes}}, CLI::ignore_case)
+                        .description("features|mc"))
+        ->default_str("mc");
     cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->add_option("--png", a->png, "Also write a before / after picture (voxwarp render's, headless Chromium)");

@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include <tuple>
+
 #include <algorithm>
 #include <numeric>
 #include <random>
@@ -258,6 +260,72 @@ std::int64_t side_components(const Voxmap& v, bool inside, bool face_diagonals) 
 // must be the boundaries between the inside's 6-connected components and the outside's 18-connected ones (an
 // ambiguous face joins its outside corners), one piece per inside and per enclosed outside component; and each
 // vertex must lie on a grid edge at the linear zero of its two voxels.
+/// A unit cube turned by `R`: distance of a point to its surface, and points along its twelve edges.
+struct TurnedCube {
+    Eigen::Matrix3d R;
+    double distance(const Eigen::Vector3d& p) const {
+        const Eigen::Vector3d q = (R.transpose() * p).cwiseAbs() - Eigen::Vector3d::Constant(0.5);
+        return std::abs(q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0));
+    }
+    std::vector<Eigen::Vector3d> edge_points(int per_edge) const {
+        std::vector<Eigen::Vector3d> out;
+        for (int e = 0; e < 12; ++e)
+            for (int i = 0; i <= per_edge; ++i) {
+                Eigen::Vector3d p;
+                const int axis = e / 4;
+                p[axis] = -0.5 + double(i) / per_edge;
+                p[(axis + 1) % 3] = e & 1 ? 0.5 : -0.5;
+                p[(axis + 2) % 3] = e & 2 ? 0.5 : -0.5;
+                out.push_back(R * p);
+            }
+        return out;
+    }
+    TriangleMesh mesh() const {
+        TriangleMesh m = test::box_mesh({-0.5, -0.5, -0.5}, {0.5, 0.5, 0.5}, 1);
+        for (auto& v : m.vertices) v = R * v;
+        return m;
+    }
+};
+
+struct Sharpness {
+    double vertex_max, edge_mean, edge_max, edge_within; // voxels; share of edge points within 0.15 voxel
+};
+
+Sharpness sharpness(const TurnedCube& cube, const TriangleMesh& out, double h) {
+    Sharpness s{0, 0, 0, 0};
+    for (const auto& v : out.vertices) s.vertex_max = std::max(s.vertex_max, cube.distance(v) / h);
+    const auto d = distances_to_surface(cube.edge_points(100), out);
+    for (double x : d) s.edge_mean += x / h / double(d.size()), s.edge_max = std::max(s.edge_max, x / h), s.edge_within += x / h <= 0.15 ? 1.0 / double(d.size()) : 0.0;
+    return s;
+}
+
+TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
+    // Cubes turned off every axis, voxelized and meshed back with the feature mesher and the input's sharp parts
+    // as Hermite data, against the analytic cube; marching cubes beside it for scale.
+    for (const auto& [a, b, resolution] : {std::tuple{27.0, 38.0, 32}, std::tuple{10.0, 20.0, 32}, std::tuple{33.0, 61.0, 40}, std::tuple{17.0, 71.0, 24},
+                                            std::tuple{52.0, 13.0, 40}}) {
+        SCOPED_TRACE(std::to_string(a) + ", " + std::to_string(b) + " degrees at " + std::to_string(resolution));
+        const TurnedCube cube{(Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX())).toRotationMatrix()};
+        const TriangleMesh input = cube.mesh();
+        const SparseVoxmap v = voxelize_sparse(input, {.resolution = resolution});
+        const double h = v.voxel_size();
+        const FeatureSurface features = sharp_feature_surface(input, h);
+        const TriangleMesh sharp = extract(v, {.mesher = Mesher::features, .feature_surface = &features});
+        const TriangleMesh mc = extract(v, {.mesher = Mesher::marching_cubes});
+        const Sharpness s = sharpness(cube, sharp, h), m = sharpness(cube, mc, h);
+        std::printf("cube %g/%g at %d: features: vertices within %.3f, edges mean %.3f max %.3f (%.1f %% within 0.15); marching cubes: %.3f, %.3f, %.3f (%.1f %%) voxels\n",
+                    a, b, resolution, s.vertex_max, s.edge_mean, s.edge_max, 100 * s.edge_within, m.vertex_max, m.edge_mean, m.edge_max, 100 * m.edge_within);
+        EXPECT_LE(s.vertex_max, 0.1);
+        EXPECT_LE(s.edge_mean, 0.03);
+        EXPECT_GE(s.edge_within, 0.95);
+        EXPECT_LE(s.edge_max, 0.6);
+        for (const auto& corner : {Eigen::Vector3d(-0.5, -0.5, -0.5), Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(-0.5, 0.5, 0.5)})
+            EXPECT_LE(distances_to_surface({cube.R * corner}, sharp)[0] / h, 0.15);
+        expect_closed_manifold(sharp);
+        EXPECT_EQ(topology(sharp).euler, 2);
+    }
+}
+
 TEST(Extract, RandomFieldsGiveWatertightSurfacesOnGridEdges) {
     std::mt19937 rng(11);
     for (int trial = 0; trial < 12; ++trial) {
@@ -266,7 +334,11 @@ TEST(Extract, RandomFieldsGiveWatertightSurfacesOnGridEdges) {
         const float bias = 0.2f + 0.05f * float(trial); // from mostly outside to mostly inside
         for (float& x : v.density) x = std::clamp(density(rng) + bias - 0.45f, 0.0f, 1.0f);
         for (std::size_t n = 0; n < v.density.size(); n += 17) v.density[n] = 0.5f;
-        const TriangleMesh mesh = extract(v);
+        // The feature mesher on the same fields (its normals disagree everywhere): still closed, same pieces.
+        const TriangleMesh sharpened = extract(v, {.mesher = Mesher::features});
+        expect_closed_manifold(sharpened);
+        EXPECT_EQ(topology(sharpened).components, side_components(v, true, false) + side_components(v, false, true) - 1) << trial;
+        const TriangleMesh mesh = extract(v, {.mesher = Mesher::marching_cubes});
         ASSERT_FALSE(mesh.triangles.empty()) << trial;
         expect_closed_manifold(mesh);
         const MeshTopology t = topology(mesh);

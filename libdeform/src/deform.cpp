@@ -170,7 +170,8 @@ void measure_targets(EditReport& er, const std::vector<Constraint>& constraints,
 }
 
 /// The edits of deform_voxmap; `model` (the input mesh, or null) tells how far the first edit's points lie from it.
-SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report, const TriangleMesh* model) {
+SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report, const TriangleMesh* model,
+                       FeatureSurface* features = nullptr) {
     Progress progress(options.progress, "deform");
     report.voxel_size = voxmap.voxel_size();
     report.dims = voxmap.dims();
@@ -225,6 +226,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
             t = Clock::now();
             progress.stage("warp edit " + std::to_string(e + 1) + "/" + std::to_string(script.edits.size()) +
                            (er.steps > 1 ? " step " + std::to_string(s + 1) + "/" + std::to_string(er.steps) : ""));
+            if (features) push_feature_surface(domain.lattice, solution.lattice, *features); // the sharp parts go with the space
             voxmap = warp(std::move(domain), solution.lattice, {.preview = options.preview, .progress = options.progress});
             report.seconds_warp += seconds_since(t);
             progress.report(double(s + 1) / er.steps);
@@ -263,10 +265,15 @@ SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions
 
 TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     report.mode = "volume";
-    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh);
+    // The feature mesher's Hermite data: the input around its sharp edges, carried through every warp.
+    FeatureSurface features;
+    const bool sharpen = options.extract.mesher == Mesher::features && options.extract.adaptivity == 0 && !options.extract.quads;
+    if (sharpen) features = sharp_feature_surface(mesh, voxmap.voxel_size(), options.extract.feature_angle);
+    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh, sharpen && !features.empty() ? &features : nullptr);
     auto t = Clock::now();
     ExtractOptions eo = options.extract;
     eo.progress = options.progress;
+    if (sharpen && !features.empty()) eo.feature_surface = &features;
     TriangleMesh out = extract(voxmap, eo);
     if (options.target_faces > 0) out = decimate(out, options.target_faces);
     report.seconds_extract = seconds_since(t);

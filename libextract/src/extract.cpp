@@ -2,6 +2,7 @@
 #include <voxwarp/extract.h>
 #include <voxwarp_internal/vdb_convert.h>
 
+#include "features.h"
 #include "marching_cubes.h"
 
 #include <openvdb/tools/VolumeToMesh.h>
@@ -15,6 +16,8 @@ namespace {
 void check(const ExtractOptions& options) {
     if (!(options.isovalue > 0 && options.isovalue < 1))
         throw InvalidInput("extract: isovalue " + std::to_string(options.isovalue) + " is outside (0, 1)");
+    if (!(options.feature_angle > 0 && options.feature_angle < 180))
+        throw InvalidInput("extract: feature angle " + std::to_string(options.feature_angle) + " is outside (0, 180) degrees");
     if (!(options.adaptivity >= 0 && options.adaptivity <= 1))
         throw InvalidInput("extract: adaptivity " + std::to_string(options.adaptivity) + " is outside [0, 1]");
 }
@@ -53,7 +56,10 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
     check(options);
     Progress progress(options.progress, "extract");
     progress.report(0.0);
-    if (options.adaptivity == 0 && !options.quads) return extract_internal::marching_cubes(voxmap, float(options.isovalue), progress);
+    if (options.adaptivity == 0 && !options.quads) {
+        TriangleMesh mesh = extract_internal::marching_cubes(voxmap, float(options.isovalue), progress);
+        return options.mesher == Mesher::features ? extract_internal::restore_features(std::move(mesh), voxmap, options) : mesh;
+    }
     openvdb::initialize();
     return extract_grid(vdb_internal::to_density_grid(voxmap), options, progress);
 }

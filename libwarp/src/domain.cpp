@@ -98,3 +98,29 @@ WarpDomain make_domain(SparseVoxmap input, const LatticeSpec& spec, std::uint64_
 }
 
 } // namespace voxwarp
+
+namespace voxwarp {
+
+void push_points(const Lattice& rest, const Lattice& moved, std::vector<Eigen::Vector3d>& points) {
+    if (rest.size() != moved.size()) throw InvalidInput("push_points: the lattices differ in size");
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024), [&](const auto& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            try {
+                points[i] = moved.evaluate(rest.parameter_of(points[i]));
+            } catch (const SolverFailure&) {
+                // beyond the map's reach: the point stays (the mesher will find no crossing near it)
+            }
+        }
+    });
+}
+
+void push_feature_surface(const Lattice& rest, const Lattice& moved, FeatureSurface& surface) {
+    push_points(rest, moved, surface.faces.vertices);
+    std::vector<Eigen::Vector3d> ends;
+    ends.reserve(2 * surface.edges.size());
+    for (const auto& [a, b] : surface.edges) ends.push_back(a), ends.push_back(b);
+    push_points(rest, moved, ends);
+    for (std::size_t i = 0; i < surface.edges.size(); ++i) surface.edges[i] = {ends[2 * i], ends[2 * i + 1]};
+}
+
+} // namespace voxwarp

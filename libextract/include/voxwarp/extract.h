@@ -1,6 +1,14 @@
 /// @file extract.h
 /// @brief Voxmap -> indexed, shared-vertex, watertight polygon mesh of its 0.5 isosurface.
 ///
+/// Mesher::features is marching cubes with sharp features put back (after Kobbelt et al.'s
+/// Extended Marching Cubes, 2001): in a cell whose crossings' normals disagree by more than `feature_angle`, the
+/// cell's polygon becomes a fan around the point its tangent planes meet at (an edge or a corner), and edges
+/// between such points in neighbouring cells are flipped to join them, so edges and corners come out straight
+/// and sharp. Near `feature_surface` (the input's surface around its sharp edges, e.g. sharp_feature_surface of the
+/// mesh voxelized, carried through a warp) the crossings and their normals are where each grid edge meets it;
+/// elsewhere the normals come from the density's gradient. Away from sharp parts the output is marching cubes'.
+///
 /// Triangles come from marching cubes: one vertex on each grid edge whose ends lie on opposite sides, at the
 /// linear zero of the two densities, so the crossings voxelize fits are met exactly. An ambiguous grid face
 /// (inside corners on one diagonal only) joins its outside corners; voxelize makes every such face with a wall
@@ -13,12 +21,23 @@
 
 #include <voxwarp/progress.h>
 #include <voxwarp/sparse_voxmap.h>
+#include <voxwarp/surface_samples.h>
 #include <voxwarp/triangle_mesh.h>
 #include <voxwarp/voxmap.h>
 
+#include <vector>
+
 namespace voxwarp {
 
+enum class Mesher {
+    marching_cubes, ///< vertices on grid edges at the linear zero of the densities: smooth shapes, chamfered edges; the default
+    features,       ///< marching cubes with sharp edges and corners restored (see above)
+};
+
 struct ExtractOptions {
+    Mesher mesher = Mesher::marching_cubes;
+    double feature_angle = 35;           ///< degrees: crossings' normals further apart than this mark a sharp part
+    const FeatureSurface* feature_surface = nullptr; ///< optional Hermite data for the feature mesher (world units)
     double isovalue = 0.5;   ///< density of the surface, (0, 1)
     double adaptivity = 0.0; ///< OpenVDB's adaptivity [0, 1]: 0 = uniform faces, higher merges flat areas (VolumeToMesh)
     bool quads = false;      ///< OpenVDB's quads instead of triangles (VolumeToMesh)

@@ -16,6 +16,7 @@
 
 #include <voxwarp/progress.h>
 #include <voxwarp/sparse_voxmap.h>
+#include <voxwarp/surface_samples.h>
 #include <voxwarp/triangle_mesh.h>
 #include <voxwarp/voxmap.h>
 
@@ -54,6 +55,11 @@ std::uint64_t voxelize_memory_estimate(const TriangleMesh& mesh, const VoxelizeO
 
 /// Sign method `automatic` resolves to for this mesh.
 SignMethod resolve_sign_method(const TriangleMesh& mesh);
+
+/// Hermite data for the feature mesher (extract.h): the mesh's faces within 3 voxels of its sharp edges (two faces
+/// meeting at more than `angle_degrees`), cut into triangles at most a voxel across. Empty for a mesh without
+/// sharp edges. World units; `voxel_size` is the voxmap's.
+FeatureSurface sharp_feature_surface(const TriangleMesh& mesh, double voxel_size, double angle_degrees = 35);
 
 /// Voxelize a mesh (world units) into an antialiased voxmap whose voxel (0,0,0) centre sits padding_voxels
 /// voxels below the mesh's minimum corner. Parallel (oneTBB).

@@ -25,6 +25,7 @@
 #include <voxwarp/lattice.h>
 #include <voxwarp/progress.h>
 #include <voxwarp/sparse_voxmap.h>
+#include <voxwarp/surface_samples.h>
 #include <voxwarp/voxmap.h>
 
 #include <array>
@@ -83,6 +84,12 @@ SparseVoxmap warp(WarpDomain&& domain, const Lattice& lattice, const WarpOptions
 /// The same warp computed the slow, obvious way: the 64-term basis sum evaluated directly at every voxel, no
 /// tables, one thread. For tests and the BM_WarpNaive benchmark only.
 Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice);
+
+/// Carry world points through the map: each to where `moved` takes the parameter `rest` gives it (`rest` is the
+/// undeformed lattice `moved` came from). E.g. a FeatureSurface's vertices. Parallel.
+void push_points(const Lattice& rest, const Lattice& moved, std::vector<Eigen::Vector3d>& points);
+/// The same for a feature surface's face vertices and edge ends.
+void push_feature_surface(const Lattice& rest, const Lattice& moved, FeatureSurface& surface);
 
 /// A warp in progress (paper section 7's main loop): precompute once, then move control points and read the
 /// target back. Each move re-splats only the <= 4^3 regions the point supports.

@@ -1,0 +1,462 @@
+// Sharp features on marching cubes' output (Extended Marching Cubes, Kobbelt, Botsch, Schwanecke & Seidel 2001):
+// normals at the crossings, a vertex where a cell's tangent planes meet, fans around it, and flips that join
+// neighbouring feature vertices along the edge. See extract.h for what it promises; marching_cubes.cpp for the
+// mesh it starts from (every vertex on a grid edge, every triangle inside one cell).
+#include "features.h"
+
+#include <Eigen/SVD>
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <map>
+#include <memory>
+#include <limits>
+#include <set>
+#include <unordered_map>
+#include <unordered_set>
+
+namespace voxwarp::extract_internal {
+
+namespace {
+
+using Index3 = std::array<std::int64_t, 3>;
+
+std::uint64_t cell_key(const Index3& c) {
+    // 21 bits per axis, offset so that the border's cells (index -1) fit.
+    return std::uint64_t(c[0] + 2) | std::uint64_t(c[1] + 2) << 21 | std::uint64_t(c[2] + 2) << 42;
+}
+
+/// A feature surface's triangles hashed by the voxels their bounding boxes touch.
+class TriangleGrid {
+public:
+    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s) {
+        for (std::size_t t = 0; t < s.triangles.size(); ++t) {
+            const auto& f = s.triangles[t];
+            const Eigen::Vector3d &a = s.vertices[std::size_t(f[0])], &b = s.vertices[std::size_t(f[1])], &c = s.vertices[std::size_t(f[2])];
+            const Eigen::Vector3d lo = v.index_of(a.cwiseMin(b).cwiseMin(c)), hi = v.index_of(a.cwiseMax(b).cwiseMax(c));
+            if (((hi - lo).array() > 64).any()) continue; // not a voxel-sized piece: the surface was not cut for this voxmap
+            for (std::int64_t z = std::int64_t(std::floor(lo.z())); z <= std::int64_t(std::floor(hi.z())); ++z)
+                for (std::int64_t y = std::int64_t(std::floor(lo.y())); y <= std::int64_t(std::floor(hi.y())); ++y)
+                    for (std::int64_t x = std::int64_t(std::floor(lo.x())); x <= std::int64_t(std::floor(hi.x())); ++x) cells_[cell_key({x, y, z})].push_back(std::uint32_t(t));
+        }
+    }
+    /// Where the segment a -> b meets the surface (parameter t in [0, 1] and the face's unit normal), the meeting
+    /// nearest to `near_t` (Moeller & Trumbore); false when it meets none of the triangles in the voxels given.
+    bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<std::uint64_t, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
+        const Eigen::Vector3d d = b - a;
+        double best = std::numeric_limits<double>::infinity();
+        for (const std::uint64_t key : voxels) {
+            const auto it = cells_.find(key);
+            if (it == cells_.end()) continue;
+            for (std::uint32_t t : it->second) {
+                const auto& f = surface_.triangles[t];
+                const Eigen::Vector3d &p = surface_.vertices[std::size_t(f[0])], &q = surface_.vertices[std::size_t(f[1])], &r = surface_.vertices[std::size_t(f[2])];
+                const Eigen::Vector3d e1 = q - p, e2 = r - p, s = d.cross(e2);
+                const double det = e1.dot(s);
+                if (std::abs(det) < 1e-300) continue;
+                const Eigen::Vector3d o = a - p;
+                const double u = o.dot(s) / det;
+                if (u < -1e-9 || u > 1 + 1e-9) continue;
+                const Eigen::Vector3d k = o.cross(e1);
+                const double w = d.dot(k) / det;
+                if (w < -1e-9 || u + w > 1 + 1e-9) continue;
+                const double t_hit = e2.dot(k) / det;
+                if (t_hit < 0 || t_hit > 1 || std::abs(t_hit - near_t) >= best) continue;
+                best = std::abs(t_hit - near_t);
+                t_out = t_hit;
+                normal = e1.cross(e2).normalized();
+            }
+        }
+        return std::isfinite(best);
+    }
+
+    /// The nearest point of the surface's triangles in the 3^3 voxels around `p`'s voxel within `radius`, with its
+    /// triangle's unit normal; false when none is that near.
+    bool nearest(const Eigen::Vector3d& p, const SparseVoxmap& v, double radius, Eigen::Vector3d& point, Eigen::Vector3d& normal) const {
+        const Eigen::Vector3d q = v.index_of(p);
+        const Index3 c{std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
+        double best = radius;
+        bool found = false;
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const auto it = cells_.find(cell_key({c[0] + dx, c[1] + dy, c[2] + dz}));
+                    if (it == cells_.end()) continue;
+                    for (std::uint32_t t : it->second) {
+                        const auto& f = surface_.triangles[t];
+                        const Eigen::Vector3d x = closest_on_triangle(p, surface_.vertices[std::size_t(f[0])], surface_.vertices[std::size_t(f[1])], surface_.vertices[std::size_t(f[2])]);
+                        const double d = (x - p).norm();
+                        if (d < best) {
+                            best = d, point = x, found = true;
+                            const Eigen::Vector3d n = (surface_.vertices[std::size_t(f[1])] - surface_.vertices[std::size_t(f[0])]).cross(surface_.vertices[std::size_t(f[2])] - surface_.vertices[std::size_t(f[0])]);
+                            normal = n.normalized();
+                        }
+                    }
+                }
+        return found;
+    }
+
+private:
+    /// Ericson's closest point on triangle abc to p.
+    static Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+        const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+        const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+        if (d1 <= 0 && d2 <= 0) return a;
+        const Eigen::Vector3d bp = p - b;
+        const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+        if (d3 >= 0 && d4 <= d3) return b;
+        const double vc = d1 * d4 - d3 * d2;
+        if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+        const Eigen::Vector3d cp = p - c;
+        const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+        if (d6 >= 0 && d5 <= d6) return c;
+        const double vb = d5 * d2 - d1 * d6;
+        if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+        const double va = d3 * d6 - d5 * d4;
+        if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+        const double denom = 1.0 / (va + vb + vc);
+        return a + ab * (vb * denom) + ac * (vc * denom);
+    }
+    const TriangleMesh& surface_;
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
+};
+
+/// A vertex's grid edge: the low voxel and the axis (or axis -1 for a vertex that is not on one, a fan centre).
+struct GridEdge {
+    Index3 low{};
+    int axis = -1;
+    double t = 0;
+};
+
+GridEdge edge_of(const SparseVoxmap& v, const Eigen::Vector3d& p) {
+    const Eigen::Vector3d q = v.index_of(p);
+    GridEdge e;
+    int fractional = 0;
+    for (int a = 0; a < 3; ++a) {
+        const double r = std::round(q[a]);
+        if (std::abs(q[a] - r) > 1e-5) ++fractional, e.axis = a;
+    }
+    if (fractional == 0) { // on a grid node: the surface passes through a voxel centre; its +x edge stands in
+        for (int a = 0; a < 3; ++a) e.low[std::size_t(a)] = std::int64_t(std::round(q[a]));
+        e.axis = 0, e.t = 0;
+        return e;
+    }
+    if (fractional != 1) return {};
+    for (int a = 0; a < 3; ++a) e.low[std::size_t(a)] = a == e.axis ? std::int64_t(std::floor(q[a])) : std::int64_t(std::round(q[a]));
+    e.t = q[e.axis] - double(e.low[std::size_t(e.axis)]);
+    return e;
+}
+
+/// Outward normal from the density's gradient (it decreases outwards), linear along the edge between its ends'
+/// central differences.
+Eigen::Vector3d gradient_normal(const SparseVoxmap& v, const GridEdge& e) {
+    auto grad = [&](const Index3& c) {
+        return Eigen::Vector3d(double(v.at(c[0] + 1, c[1], c[2])) - v.at(c[0] - 1, c[1], c[2]), double(v.at(c[0], c[1] + 1, c[2])) - v.at(c[0], c[1] - 1, c[2]),
+                               double(v.at(c[0], c[1], c[2] + 1)) - v.at(c[0], c[1], c[2] - 1));
+    };
+    Index3 high = e.low;
+    ++high[std::size_t(e.axis)];
+    const Eigen::Vector3d g = (1 - e.t) * grad(e.low) + e.t * grad(high);
+    const double n = g.norm();
+    return n > 0 ? Eigen::Vector3d(-g / n) : Eigen::Vector3d::Zero();
+}
+
+/// The point nearest the mass point `centre` where tangent planes (point, normal) meet, singular values below a
+/// tenth of the largest dropped (an edge leaves one direction free, a plane two).
+Eigen::Vector3d qef_point(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals, const Eigen::Vector3d& centre, int& rank) {
+    Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d b = Eigen::Vector3d::Zero();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+        A += normals[i] * normals[i].transpose();
+        b += normals[i] * normals[i].dot(points[i] - centre);
+    }
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Eigen::Vector3d sigma = svd.singularValues();
+    Eigen::Vector3d inverse = Eigen::Vector3d::Zero();
+    rank = 0;
+    for (int i = 0; i < 3; ++i)
+        if (sigma[i] > 0.1 * sigma[0]) inverse[i] = 1.0 / sigma[i], ++rank;
+    return centre + svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose() * b;
+}
+
+} // namespace
+
+TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options) {
+    const double h = voxmap.voxel_size();
+    const double cos_feature = std::cos(options.feature_angle * M_PI / 180.0);
+    const std::size_t nv = mesh.vertices.size();
+    std::vector<GridEdge> edges(nv);
+    std::vector<Eigen::Vector3d> normals(nv, Eigen::Vector3d::Zero());
+    std::unique_ptr<TriangleGrid> grid;
+    if (options.feature_surface && !options.feature_surface->faces.triangles.empty()) grid = std::make_unique<TriangleGrid>(options.feature_surface->faces, voxmap);
+
+    // Normals, and near the feature surface the crossings themselves: where the vertex's grid edge meets it (the
+    // density's linear zero is off near an edge or corner, where the distance it ramps is not linear along the
+    // grid edge).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const auto& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            GridEdge& e = edges[i];
+            e = edge_of(voxmap, mesh.vertices[i]);
+            if (e.axis < 0) continue;
+            normals[i] = gradient_normal(voxmap, e);
+            if (!grid) continue;
+            const Eigen::Vector3d a = voxmap.world(double(e.low[0]), double(e.low[1]), double(e.low[2]));
+            Eigen::Vector3d b = a;
+            b[e.axis] += h;
+            Index3 high = e.low;
+            ++high[std::size_t(e.axis)];
+            double t = e.t;
+            Eigen::Vector3d n = Eigen::Vector3d::Zero();
+            Eigen::Vector3d x;
+            if (grid->hit(a, b, {cell_key(e.low), cell_key(high)}, e.t, t, n) && n.dot(normals[i]) > 0) {
+                mesh.vertices[i] = a + t * (b - a);
+                normals[i] = n;
+                e.t = t;
+            } else if (grid->nearest(mesh.vertices[i], voxmap, 0.6 * h, x, n) && n.dot(normals[i]) > 0) {
+                // The density put a crossing on a grid edge the surface misses (resampled by a warp, it rounds sharp
+                // parts a little): the vertex goes to the surface, off its grid edge.
+                mesh.vertices[i] = x;
+                normals[i] = n;
+            }
+        }
+    });
+
+    // Cells holding a triangle whose corners' normals disagree: the candidates.
+    const std::size_t nt = mesh.triangles.size();
+    auto cell_of = [&](const std::array<std::int32_t, 3>& t) {
+        const Eigen::Vector3d q = voxmap.index_of((mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3);
+        return Index3{std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
+    };
+    std::vector<std::uint8_t> sharp(nt, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096), [&](const auto& range) {
+        for (std::size_t f = range.begin(); f != range.end(); ++f) {
+            const auto& t = mesh.triangles[f];
+            const Eigen::Vector3d &a = normals[std::size_t(t[0])], &b = normals[std::size_t(t[1])], &c = normals[std::size_t(t[2])];
+            if (a.isZero() || b.isZero() || c.isZero()) continue;
+            sharp[f] = std::min({a.dot(b), b.dot(c), c.dot(a)}) < cos_feature;
+        }
+    });
+    std::unordered_set<std::uint64_t> candidate_cells;
+    for (std::size_t f = 0; f < nt; ++f)
+        if (sharp[f]) candidate_cells.insert(cell_key(cell_of(mesh.triangles[f])));
+    // The input's sharp edges, where given: every cell they pass through holds a feature, even one where marching
+    // cubes sees only one of the two faces (an edge that clips a cell's corner between its grid edges); there the
+    // feature point is the middle of the edge's stretch inside the cell.
+    std::unordered_map<std::uint64_t, std::pair<Eigen::Vector3d, double>> edge_in_cell; // length-weighted sum of points, length
+    if (options.feature_surface)
+        for (const auto& [a, b] : options.feature_surface->edges) {
+            // Every cell the segment passes through (Amanatides & Woo's traversal), with the middle of its stretch
+            // there weighted by the stretch's length: clips of any size count.
+            const Eigen::Vector3d qa = voxmap.index_of(a), qb = voxmap.index_of(b), d = qb - qa;
+            Index3 c{std::int64_t(std::floor(qa.x())), std::int64_t(std::floor(qa.y())), std::int64_t(std::floor(qa.z()))};
+            const Index3 last{std::int64_t(std::floor(qb.x())), std::int64_t(std::floor(qb.y())), std::int64_t(std::floor(qb.z()))};
+            double t = 0;
+            for (int guard = 0; guard < 4096; ++guard) {
+                double exit = 1;
+                int axis = -1;
+                for (int k = 0; k < 3; ++k) {
+                    if (d[k] == 0) continue;
+                    const double boundary = double(c[std::size_t(k)]) + (d[k] > 0 ? 1.0 : 0.0);
+                    const double tk = (boundary - qa[k]) / d[k];
+                    if (tk < exit) exit = tk, axis = k;
+                }
+                exit = std::max(exit, t);
+                const double length = (exit - t) * d.norm();
+                auto& [sum, weight] = edge_in_cell.try_emplace(cell_key(c), Eigen::Vector3d::Zero(), 0.0).first->second;
+                sum += length * (a + (b - a) * (0.5 * (t + exit))), weight += length;
+                candidate_cells.insert(cell_key(c));
+                if (axis < 0 || c == last || exit >= 1) break;
+                c[std::size_t(axis)] += d[axis] > 0 ? 1 : -1;
+                t = exit;
+            }
+        }
+    // A sharp edge may clip a cell so thinly that none of its grid corners is inside: marching cubes meshes nothing
+    // there, and chamfers the edge in a neighbouring cell instead. That neighbour (the meshed cell nearest the
+    // edge's stretch, not on the edge itself) takes the edge's point.
+    std::unordered_map<std::uint64_t, Eigen::Vector3d> borrowed;
+    if (!edge_in_cell.empty()) {
+        std::unordered_set<std::uint64_t> meshed;
+        for (std::size_t f = 0; f < nt; ++f) meshed.insert(cell_key(cell_of(mesh.triangles[f])));
+        std::vector<std::pair<std::uint64_t, Eigen::Vector3d>> empty;
+        for (const auto& [key, acc] : edge_in_cell)
+            if (!meshed.count(key) && acc.second > 0) empty.emplace_back(key, acc.first / acc.second);
+        std::sort(empty.begin(), empty.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+        for (const auto& [key, point] : empty) {
+            const Index3 c{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
+            double best = std::numeric_limits<double>::infinity();
+            std::uint64_t chosen = 0;
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const Index3 n{c[0] + dx, c[1] + dy, c[2] + dz};
+                        const std::uint64_t nk = cell_key(n);
+                        if (!meshed.count(nk) || edge_in_cell.count(nk) || borrowed.count(nk)) continue;
+                        const double d = (voxmap.index_of(point) - Eigen::Vector3d(double(n[0]) + 0.5, double(n[1]) + 0.5, double(n[2]) + 0.5)).norm();
+                        if (d < best) best = d, chosen = nk;
+                    }
+            if (std::isfinite(best)) borrowed.emplace(chosen, point), candidate_cells.insert(chosen);
+        }
+    }
+    std::map<std::uint64_t, std::vector<std::uint32_t>> cell_triangles; // ordered: the output does not depend on hashing
+    for (std::size_t f = 0; f < nt; ++f) {
+        const std::uint64_t key = cell_key(cell_of(mesh.triangles[f]));
+        if (candidate_cells.count(key)) cell_triangles[key].push_back(std::uint32_t(f));
+    }
+
+    // Per candidate cell, per loop (triangles joined through vertices): where its tangent planes meet.
+    struct Loop {
+        std::vector<std::uint32_t> triangles;
+        Index3 cell;
+        Eigen::Vector3d point;
+        int rank = 0;
+        bool outside = false; // its point is a neighbour's (borrowed above)
+    };
+    std::vector<Loop> features;
+    for (const auto& [key, faces] : cell_triangles) {
+        const Index3 cell{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
+        std::vector<int> parent(faces.size());
+        for (std::size_t i = 0; i < faces.size(); ++i) parent[i] = int(i);
+        std::function<int(int)> root = [&](int i) { return parent[std::size_t(i)] == i ? i : parent[std::size_t(i)] = root(parent[std::size_t(i)]); };
+        std::map<std::int32_t, int> owner;
+        for (std::size_t i = 0; i < faces.size(); ++i)
+            for (auto v : mesh.triangles[faces[i]]) {
+                auto [it, inserted] = owner.try_emplace(v, int(i));
+                if (!inserted) parent[std::size_t(root(int(i)))] = root(it->second);
+            }
+        std::map<int, std::vector<std::uint32_t>> loops;
+        for (std::size_t i = 0; i < faces.size(); ++i) loops[root(int(i))].push_back(faces[i]);
+        for (auto& [r, loop] : loops) {
+            std::vector<Eigen::Vector3d> points, ns;
+            std::set<std::int32_t> seen;
+            bool usable = true;
+            for (auto f : loop)
+                for (auto v : mesh.triangles[f])
+                    if (edges[std::size_t(v)].axis >= 0 && seen.insert(v).second) {
+                        usable &= !normals[std::size_t(v)].isZero();
+                        points.push_back(mesh.vertices[std::size_t(v)]);
+                        ns.push_back(normals[std::size_t(v)]);
+                    }
+            if (!usable || points.size() < 3) continue;
+            double worst = 1;
+            for (std::size_t i = 0; i < ns.size(); ++i)
+                for (std::size_t j = i + 1; j < ns.size(); ++j) worst = std::min(worst, ns[i].dot(ns[j]));
+            const auto along = edge_in_cell.find(key);
+            const auto lent = borrowed.find(key);
+            if (worst >= cos_feature && along == edge_in_cell.end() && lent == borrowed.end()) continue;
+            Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+            for (const auto& p : points) centre += p;
+            centre /= double(points.size());
+            Loop l{std::move(loop), cell, Eigen::Vector3d::Zero(), 0, false};
+            l.point = qef_point(points, ns, centre, l.rank);
+            // On a known sharp edge, the edge's own point, unless the planes find a corner in the cell.
+            if (along != edge_in_cell.end() && along->second.second > 0 && !(l.rank == 3 && worst < cos_feature))
+                l.point = along->second.first / along->second.second, l.rank = 2;
+            if (lent != borrowed.end()) l.point = lent->second, l.rank = 2, l.outside = true;
+            if (l.rank >= 2) features.push_back(std::move(l));
+        }
+    }
+    // A corner whose tip pokes into a cell no grid corner of which is inside lies outside every cell around it:
+    // the loops around it that agree on it (rank 3, within a fifth of a voxel) become one patch, fanned to it.
+    std::vector<int> group(features.size());
+    for (std::size_t i = 0; i < features.size(); ++i) group[i] = int(i);
+    std::function<int(int)> find = [&](int i) { return group[std::size_t(i)] == i ? i : group[std::size_t(i)] = find(group[std::size_t(i)]); };
+    {
+        std::map<std::int32_t, std::vector<int>> corner_loops_at; // vertex -> rank-3 loops using it
+        for (std::size_t i = 0; i < features.size(); ++i)
+            if (features[i].rank == 3)
+                for (auto f : features[i].triangles)
+                    for (auto v : mesh.triangles[f]) corner_loops_at[v].push_back(int(i));
+        for (const auto& [v, ls] : corner_loops_at)
+            for (std::size_t a = 1; a < ls.size(); ++a)
+                if ((features[std::size_t(ls[0])].point - features[std::size_t(ls[a])].point).norm() < 0.2 * h) group[std::size_t(find(ls[a]))] = find(ls[0]);
+    }
+    std::map<int, std::vector<int>> patches;
+    for (std::size_t i = 0; i < features.size(); ++i) patches[find(int(i))].push_back(int(i));
+
+    std::vector<std::uint8_t> removed(nt, 0);
+    std::vector<std::array<std::int32_t, 3>> added;
+    for (const auto& [r, members] : patches) {
+        std::vector<std::uint32_t> tris;
+        Eigen::Vector3d point = Eigen::Vector3d::Zero();
+        Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+        for (int i : members) {
+            const Loop& l = features[std::size_t(i)];
+            tris.insert(tris.end(), l.triangles.begin(), l.triangles.end());
+            point += l.point / double(members.size());
+            for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], double(l.cell[std::size_t(a)])), hi[a] = std::max(hi[a], double(l.cell[std::size_t(a)]) + 1);
+        }
+        // The patch's boundary: directed edges used once, chained into one cycle.
+        std::map<std::pair<std::int32_t, std::int32_t>, int> count;
+        for (auto f : tris) {
+            const auto& t = mesh.triangles[f];
+            for (int c = 0; c < 3; ++c) count[{t[std::size_t(c)], t[std::size_t((c + 1) % 3)]}]++;
+        }
+        std::map<std::int32_t, std::int32_t> next;
+        bool simple = true;
+        for (const auto& [e, n] : count)
+            if (!count.count({e.second, e.first})) simple &= n == 1 && next.emplace(e.first, e.second).second;
+        if (!simple || next.size() < 3) continue;
+        std::vector<std::int32_t> cycle{next.begin()->first};
+        while (cycle.size() <= next.size()) {
+            const auto it = next.find(cycle.back());
+            if (it == next.end() || it->second == cycle.front()) break;
+            cycle.push_back(it->second);
+        }
+        if (cycle.size() != next.size()) continue; // not one disk
+        // Where the point may go: its cells (a little slack for points on their faces), or for a corner the
+        // cells next to them, where its tip may hide.
+        const double slack = features[std::size_t(members[0])].rank == 3 || features[std::size_t(members[0])].outside ? 1.0 : 0.05;
+        const Eigen::Vector3d q = voxmap.index_of(point);
+        if (((q - lo).array() < -slack).any() || ((q - hi).array() > slack).any()) continue;
+        const auto centre_index = std::int32_t(mesh.vertices.size());
+        mesh.vertices.push_back(point);
+        for (auto f : tris) removed[f] = 1;
+        for (std::size_t i = 0; i < cycle.size(); ++i) added.push_back({centre_index, cycle[i], cycle[(i + 1) % cycle.size()]});
+    }
+    if (added.empty()) return mesh;
+    std::vector<std::array<std::int32_t, 3>> triangles;
+    triangles.reserve(nt + added.size());
+    for (std::size_t f = 0; f < nt; ++f)
+        if (!removed[f]) triangles.push_back(mesh.triangles[f]);
+    const std::size_t first_added = triangles.size();
+    triangles.insert(triangles.end(), added.begin(), added.end());
+
+    // Flip the edge between two fans whose centres both are feature vertices: the two centres join, along the
+    // sharp edge. Only where the centres are not joined yet and neither triangle turns over.
+    std::map<std::pair<std::int32_t, std::int32_t>, std::pair<std::size_t, std::size_t>> shared; // undirected edge -> (triangle, triangle)
+    for (std::size_t f = first_added; f < triangles.size(); ++f) {
+        const auto& t = triangles[f];
+        const std::pair<std::int32_t, std::int32_t> e = std::minmax(t[1], t[2]); // the fan's outer edge
+        auto [it, inserted] = shared.try_emplace(e, f, std::size_t(-1));
+        if (!inserted) it->second.second = f;
+    }
+    std::set<std::pair<std::int32_t, std::int32_t>> joined;
+    for (std::size_t f = first_added; f < triangles.size(); ++f) {
+        const auto& t = triangles[f];
+        for (int c = 0; c < 3; ++c) joined.insert(std::minmax(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
+    }
+    auto normal = [&](const std::array<std::int32_t, 3>& t) {
+        return Eigen::Vector3d((mesh.vertices[std::size_t(t[1])] - mesh.vertices[std::size_t(t[0])]).cross(mesh.vertices[std::size_t(t[2])] - mesh.vertices[std::size_t(t[0])]));
+    };
+    for (const auto& [e, pair] : shared) {
+        if (pair.second == std::size_t(-1)) continue;
+        auto &A = triangles[pair.first], &B = triangles[pair.second];
+        // A = (f, v, w), B = (g, w, v) with f, g the fans' centres.
+        const std::int32_t f = A[0], g = B[0], v = A[1], w = A[2];
+        if (B[1] != w || B[2] != v || f == g || joined.count(std::minmax(f, g))) continue;
+        const std::array<std::int32_t, 3> A2{f, v, g}, B2{f, g, w};
+        const Eigen::Vector3d before = normal(A) + normal(B);
+        if (normal(A2).dot(before) <= 0 || normal(B2).dot(before) <= 0) continue;
+        if (normal(A2).dot(normal(B2)) <= -0.5 * normal(A2).norm() * normal(B2).norm()) continue; // folded
+        joined.erase(std::minmax(v, w));
+        joined.insert(std::minmax(f, g));
+        A = A2, B = B2;
+    }
+    mesh.triangles = std::move(triangles);
+    return mesh;
+}
+
+} // namespace voxwarp::extract_internal
