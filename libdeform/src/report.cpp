@@ -17,8 +17,8 @@ double change_percent(double before, double after) { return before != 0 ? 100.0 
 nlohmann::json distance(double d) { return d >= 0 && std::isfinite(d) ? nlohmann::json(d) : nlohmann::json(nullptr); }
 
 std::string method(const EditReport& e) {
-    if (e.solver == "rigid") return "rigid: ARAP local/global, then Levenberg-Marquardt (Ceres)";
-    if (e.preserve_volume) return "least motion keeping the volume: Levenberg-Marquardt (Ceres)";
+    if (e.solver == "rigid") return "rigid: ARAP local/global iterations (Anderson-accelerated)";
+    if (e.preserve_volume) return "least motion keeping the volume: local/global iterations (Anderson-accelerated)";
     return e.least_squares ? "weighted least squares (Ceres)" : "minimum-norm pseudoinverse";
 }
 

@@ -17,8 +17,9 @@
 ///
 /// Solved by local/global iterations (Sorkine & Alexa's, and with the volume term Bouaziz et al.'s Projective
 /// Dynamics, 2014): the global step's matrix is fixed, so it is factored once and every iteration is a local
-/// polar decomposition per cell plus two triangular solves. BM_SolveRigid against BM_SolveRigidCeres (the same
-/// energy minimised by Ceres' Levenberg-Marquardt, solve_rigid_ceres) says why that is the default.
+/// polar decomposition per cell plus two triangular solves; the material's total volume is held by a linearised
+/// constraint in every global step, and the iterations are accelerated after Anderson (Peng et al. 2018).
+/// BM_SolveRigid against BM_SolveRigidGraphCeres (solve_rigid_graph_ceres, below) says why that is the default.
 #pragma once
 
 #include <voxwarp/constraints.h>
@@ -72,7 +73,7 @@ struct RigidSolution : ConstraintSolution {
 RigidSolution solve_rigid(const Lattice& rest, const std::vector<Constraint>& constraints, const LatticeMaterial& material,
                           const RigidSolveOptions& options = {});
 
-/// The baseline the solve above is measured against (BM_SolveRigidGraphCeres, Rigid.BeatsTheGraphBaseline): the
+/// The baseline the solve above is measured against (BM_SolveRigidGraphCeres, Rigid.BeatsTheControlPointGraphBaseline): the
 /// design card's first sketch, embedded-deformation style. ARAP between axis-neighbouring control points (each
 /// star weighted by the material in the point's support, 1e-3 where there is none), a rotation per control point
 /// on Ceres' quaternion manifold, every constraint a stiff penalty, Levenberg-Marquardt with sparse Cholesky from
