@@ -142,7 +142,12 @@ Browser::~Browser() {
         ::waitpid(pid_, &status, 0);
     }
     std::error_code ec;
-    if (!profile_.empty()) std::filesystem::remove_all(profile_, ec);
+    if (profile_.empty()) return;
+    // Chromium keeps its singleton socket in a folder of its own under /tmp, linked from the profile; killed,
+    // it cannot remove that folder itself.
+    const auto socket = std::filesystem::read_symlink(std::filesystem::path(profile_) / "SingletonSocket", ec);
+    if (!ec && socket.parent_path().filename().string().rfind("org.chromium.Chromium.", 0) == 0) std::filesystem::remove_all(socket.parent_path(), ec);
+    std::filesystem::remove_all(profile_, ec);
 }
 
 bool Browser::running() const {

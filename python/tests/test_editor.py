@@ -8,6 +8,7 @@ import os
 import re
 import socket
 import subprocess
+import tempfile
 import threading
 import time
 import urllib.error
@@ -55,13 +56,17 @@ def server():
     assert s.process.returncode == 0, s.process.stderr.read()
 
 
+# Chromium leaves its singleton-socket folder in $TMPDIR; this one goes when the tests end.
+_BROWSER_TMP = tempfile.TemporaryDirectory(prefix="voxwarp-chromium-")
+
+
 def browser(width=1280, height=800):
     options = webdriver.ChromeOptions()
     options.binary_location = "/usr/bin/chromium"
     for a in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking",
               "--disable-component-update", "--disable-sync", "--disable-quic", "--no-first-run", "--window-size=%d,%d" % (width, height)):
         options.add_argument(a)
-    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    return webdriver.Chrome(service=Service(CHROMEDRIVER, env=dict(os.environ, TMPDIR=_BROWSER_TMP.name)), options=options)
 
 
 def wait(driver, condition, timeout=60):
