@@ -3,6 +3,7 @@
 #pragma once
 
 #include <voxwarp/errors.h>
+#include <voxwarp/extract.h>
 #include <voxwarp/progress.h>
 
 #include <CLI/CLI.hpp>
@@ -37,6 +38,26 @@ auto naming_source(const std::string& source, F&& f) -> decltype(f()) {
         if (std::string(e.what()).rfind(source, 0) == 0) throw;
         throw InvalidInput(source + ": " + e.what());
     }
+}
+
+/// `--mesher mc|features`, read through parse_mesher so the command line, edit server and Python agree.
+inline CLI::Option* add_mesher_option(CLI::App* cmd, Mesher& mesher) {
+    return cmd
+        ->add_option_function<std::string>(
+            "--mesher", [&mesher](const std::string& name) { mesher = parse_mesher(name); },
+            "mc: marching cubes (smooth, fast); features: sharp edges and corners put back (Extended Marching Cubes; "
+            "the input's own sharp edges kept)")
+        ->check([](const std::string& name) {
+            try {
+                parse_mesher(name);
+                return std::string();
+            } catch (const InvalidInput& e) {
+                const std::string what = e.what(); // CLI11 names the option itself
+                return what.substr(what.rfind("mesher: ", 0) == 0 ? 8 : 0);
+            }
+        })
+        ->type_name("features|mc")
+        ->default_str("mc");
 }
 
 /// Each subcommand registers itself and sets the action run after parsing.

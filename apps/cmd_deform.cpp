@@ -12,7 +12,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <memory>
 
 namespace voxwarp::cli {
@@ -82,10 +81,7 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("--mode", a->mode, "volume (re-polygonized, crease-free) or vertex (classic FFD of the input's vertices, for comparison)")
         ->check(CLI::IsMember({"volume", "vertex"}))
         ->capture_default_str();
-    cmd->add_option("--mesher", a->options.extract.mesher, "mc: marching cubes (smooth, fast); features: sharp edges and corners put back (Extended Marching Cubes; the input's own sharp edges kept)")
-        ->transform(CLI::CheckedTransformer(std::map<std::string, Mesher>{{"features", Mesher::features}, {"mc", Mesher::marching_cubes}}, CLI::ignore_case)
-                        .description("features|mc"))
-        ->default_str("mc");
+    add_mesher_option(cmd, a->options.extract.mesher);
     cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->add_option("--png", a->png, "Also write a before / after picture (voxwarp render's, headless Chromium)");

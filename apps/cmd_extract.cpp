@@ -5,7 +5,6 @@
 #include <voxwarp/mesh_io.h>
 #include <voxwarp/vdb_io.h>
 
-#include <map>
 #include <memory>
 
 namespace voxwarp::cli {
@@ -21,10 +20,7 @@ void add_extract(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("-o,--output", args->output, "Output mesh (.obj .off .ply .stl .om)")->required();
     cmd->add_option("--grid", args->grid, "Name of the float grid to read");
     cmd->add_option("--isovalue", args->options.isovalue, "Density of the surface")->capture_default_str();
-    cmd->add_option("--mesher", args->options.mesher, "mc: marching cubes (smooth, fast); features: sharp edges and corners put back (Extended Marching Cubes; the input's own sharp edges kept)")
-        ->transform(CLI::CheckedTransformer(std::map<std::string, Mesher>{{"features", Mesher::features}, {"mc", Mesher::marching_cubes}}, CLI::ignore_case)
-                        .description("features|mc"))
-        ->default_str("mc");
+    add_mesher_option(cmd, args->options.mesher);
     cmd->add_option("--adaptivity", args->options.adaptivity, "OpenVDB adaptivity in [0, 1]: merge faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     cmd->add_flag("--quads", args->options.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->callback([args, &global, &action] {

@@ -320,19 +320,19 @@ void define_module(py::module_& m) {
         "Voxelize a mesh into a Voxmap: `resolution` voxels along its longest side, or `voxel_size` world units.");
     m.def(
         "extract",
-        [](const std::shared_ptr<Voxmap>& voxmap, double isovalue, double adaptivity, const py::object& progress) {
+        [](const std::shared_ptr<Voxmap>& voxmap, double isovalue, double adaptivity, const std::string& mesher, const py::object& progress) {
             ExtractOptions o;
-            o.isovalue = isovalue, o.adaptivity = adaptivity;
+            o.isovalue = isovalue, o.adaptivity = adaptivity, o.mesher = parse_mesher(mesher);
             LongCall call(progress);
             o.progress = call.progress();
             return arrays_from_mesh(call.run([&] { return extract(*voxmap, o); }));
         },
-        py::arg("voxmap"), py::kw_only(), py::arg("isovalue") = 0.5, py::arg("adaptivity") = 0.0, py::arg("progress") = py::none(),
+        py::arg("voxmap"), py::kw_only(), py::arg("isovalue") = 0.5, py::arg("adaptivity") = 0.0, py::arg("mesher") = "mc", py::arg("progress") = py::none(),
         "The isosurface of a Voxmap as (V, F): a closed, outward-wound triangle mesh.");
     m.def(
         "deform",
         [](const py::handle& V, const py::handle& F, const py::handle& edit, int resolution, const py::object& voxel_size, const std::string& mode, bool preview,
-           int max_steps, std::size_t faces, const py::object& max_memory, const py::object& progress) {
+           int max_steps, std::size_t faces, const std::string& mesher, const py::object& max_memory, const py::object& progress) {
             const TriangleMesh mesh = mesh_from_arrays(V, F);
             const EditScript script = edit_from(edit);
             if (mode != "volume" && mode != "vertex") throw InvalidInput("mode: expected \"volume\" or \"vertex\", got \"" + mode + "\"");
@@ -340,6 +340,7 @@ void define_module(py::module_& m) {
             DeformOptions o;
             o.voxelize = voxelize_options(resolution, voxel_size, 3, "auto", max_memory);
             o.preview = preview, o.max_steps = max_steps, o.target_faces = faces;
+            o.extract.mesher = parse_mesher(mesher);
             LongCall call(progress);
             o.progress = call.progress();
             DeformReport report;
@@ -350,7 +351,7 @@ void define_module(py::module_& m) {
             return py::make_tuple(arrays[0], arrays[1], report_dict(report));
         },
         py::arg("V"), py::arg("F"), py::arg("edit"), py::kw_only(), py::arg("resolution") = 128, py::arg("voxel_size") = py::none(), py::arg("mode") = "volume",
-        py::arg("preview") = false, py::arg("max_steps") = 8, py::arg("faces") = 0, py::arg("max_memory") = py::none(), py::arg("progress") = py::none(),
+        py::arg("preview") = false, py::arg("max_steps") = 8, py::arg("faces") = 0, py::arg("mesher") = "mc", py::arg("max_memory") = py::none(), py::arg("progress") = py::none(),
         "Deform a mesh by an edit script (dict or path): voxelize, warp, re-polygonize. Returns (V, F, report).");
     m.def(
         "set_threads",

@@ -7,6 +7,8 @@
 
 #include <openvdb/tools/VolumeToMesh.h>
 
+#include <algorithm>
+#include <cctype>
 #include <string>
 
 namespace voxwarp {
@@ -46,6 +48,14 @@ TriangleMesh extract_grid(const openvdb::FloatGrid::Ptr& grid, const ExtractOpti
 }
 
 } // namespace
+
+Mesher parse_mesher(const std::string& name) {
+    std::string lower = name;
+    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    if (lower == "mc") return Mesher::marching_cubes;
+    if (lower == "features") return Mesher::features;
+    throw InvalidInput("mesher: expected \"mc\" or \"features\", got \"" + name + "\"");
+}
 
 TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options) {
     check(options);

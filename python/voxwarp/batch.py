@@ -3,7 +3,7 @@
     python3 -m voxwarp.batch JOBS.json [--scheduler ADDRESS] [--workers N] [--resolution N]
 
 A job is a dict: {"mesh": path, "edit": path or edit dict, "output": path, and optionally "resolution",
-"voxel_size", "mode", "preview", "max_steps", "faces" (deform's keywords)}. JOBS.json holds a list of jobs or
+"voxel_size", "mode", "preview", "max_steps", "faces", "mesher" (deform's keywords)}. JOBS.json holds a list of jobs or
 {"jobs": [...]}; relative paths are taken from the file's folder.
 
 Each job writes its output mesh and then OUTPUT.report.json (the deform report, plus the output's size), both
@@ -51,7 +51,7 @@ def _write_atomically(path, text):
         raise
 
 
-_DEFORM_KEYWORDS = ("resolution", "voxel_size", "mode", "preview", "max_steps", "faces")
+_DEFORM_KEYWORDS = ("resolution", "voxel_size", "mode", "preview", "max_steps", "faces", "mesher")
 
 
 def run_job(job):

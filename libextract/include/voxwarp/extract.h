@@ -25,6 +25,7 @@
 #include <voxwarp/triangle_mesh.h>
 #include <voxwarp/voxmap.h>
 
+#include <string>
 #include <vector>
 
 namespace voxwarp {
@@ -33,6 +34,10 @@ enum class Mesher {
     marching_cubes, ///< vertices on grid edges at the linear zero of the densities: smooth shapes, chamfered edges; the default
     features,       ///< marching cubes with sharp edges and corners restored (see above)
 };
+
+/// The mesher named as the command line and the Python module name it: "mc" or "features" (any case).
+/// @throw InvalidInput for any other name.
+Mesher parse_mesher(const std::string& name);
 
 struct ExtractOptions {
     Mesher mesher = Mesher::marching_cubes;
