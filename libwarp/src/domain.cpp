@@ -103,10 +103,14 @@ namespace voxwarp {
 
 void push_points(const Lattice& rest, const Lattice& moved, std::vector<Eigen::Vector3d>& points) {
     if (rest.size() != moved.size()) throw InvalidInput("push_points: the lattices differ in size");
+    // An undeformed uniform rest lattice (every warp's) is affine: its inverse once, not parameter_of's test of
+    // every control point for each point.
+    const bool affine = rest.placement() == Placement::uniform && rest.points() == rest.rest_points();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024), [&](const auto& range) {
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
             try {
-                points[i] = moved.evaluate(rest.parameter_of(points[i]));
+                const Eigen::Vector3d stu = affine ? Eigen::Vector3d((points[i] - rest.rest_origin()).cwiseQuotient(rest.spacing())) : rest.parameter_of(points[i]);
+                points[i] = moved.evaluate(stu);
             } catch (const SolverFailure&) {
                 // beyond the map's reach: the point stays (the mesher will find no crossing near it)
             }

@@ -57,6 +57,9 @@ public:
     const std::vector<Eigen::Vector3d>& rest_points() const { return rest_points_; }
     /// Undeformed world distance per parameter unit along each axis (the control-point spacing).
     const Eigen::Vector3d& spacing() const { return spacing_; }
+    /// Undeformed world position of parameter (0, 0, 0): parameter_of an undeformed uniform lattice is
+    /// (world - rest_origin()) / spacing().
+    const Eigen::Vector3d& rest_origin() const { return origin_; }
 
     /// B(s, t, u): world position of a parameter point. Parameters outside the domain extrapolate the
     /// boundary region's polynomial.
