@@ -262,6 +262,103 @@ TEST(Deform, CubeTurnedByTheWarpStaysSharp) {
     EXPECT_TRUE(topology(out).watertight());
 }
 
+/// Two meshes in one (their vertices renumbered).
+TriangleMesh joined(TriangleMesh a, const TriangleMesh& b) {
+    const auto offset = std::int32_t(a.vertices.size());
+    a.vertices.insert(a.vertices.end(), b.vertices.begin(), b.vertices.end());
+    for (auto t : b.triangles) a.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    return a;
+}
+
+TEST(ThinParts, APlateBetweenVoxelCentresIsReportedAndTheAdvisedResolutionKeepsIt) {
+    // A 2-unit cube and, beside it, a plate 0.3 voxel thick lying between two planes of voxel centres: the flood
+    // fill (the mesh is closed) finds no centre inside the plate, and the plate vanishes.
+    const int resolution = 24;
+    const double h = 5.0 / resolution; // the longest side is 5 (x from 0 to 5)
+    const double z0 = 4 * h + 0.35 * h, z1 = z0 + 0.3 * h; // centres lie at z = (k - 3) h
+    const TriangleMesh mesh = joined(test::box_mesh({0, 0, 0}, {2, 2, 2}, 1), test::box_mesh({3, 0.2, z0}, {5, 1.8, z1}, 4));
+    EditScript script;
+    script.edits.push_back({{pin({0, 0, 0})}});
+    DeformOptions options;
+    options.voxelize.resolution = resolution;
+    DeformReport report;
+    const TriangleMesh out = deform_mesh(mesh, script, options, report);
+    ASSERT_NEAR(report.voxel_size, h, 1e-12);
+    EXPECT_EQ(topology(out).components, 1); // the plate is gone
+    ASSERT_EQ(report.thin_parts.size(), 1u);
+    const ThinPart& part = report.thin_parts[0];
+    EXPECT_EQ(part.stage, "voxelize");
+    EXPECT_LE((part.centre - Eigen::Vector3d(4, 1, 0.5 * (z0 + z1))).norm() / h, 1.0);
+    EXPECT_NEAR(part.thickness_voxels, 0.3, 0.02);
+    const double plate_area = 2 * (2 * 1.6) + 2 * (2 + 1.6) * 0.3 * h;
+    EXPECT_NEAR(part.area_voxels * h * h, plate_area, 0.05 * plate_area);
+    EXPECT_NEAR(part.voxel_size_to_keep, 0.15 * h, 0.02 * h);
+    ASSERT_GT(part.resolution_to_keep, resolution);
+    const auto warnings = deform_warnings(report);
+    ASSERT_FALSE(warnings.empty());
+    EXPECT_NE(warnings.back().find("is missing from the voxmap: --resolution " + std::to_string(part.resolution_to_keep)), std::string::npos) << warnings.back();
+    // What the report advises keeps it.
+    options.voxelize.resolution = int(part.resolution_to_keep);
+    DeformReport kept;
+    const TriangleMesh fine = deform_mesh(mesh, script, options, kept);
+    EXPECT_TRUE(kept.thin_parts.empty());
+    EXPECT_EQ(topology(fine).components, 2);
+    EXPECT_TRUE(topology(fine).watertight());
+    EXPECT_EQ(topology(fine).euler, 4); // two spheres
+}
+
+TEST(ThinParts, NothingIsReportedWhereNothingIsLost) {
+    for (const auto& [mesh, edit, resolution] : {std::tuple{"bunny.obj", "bunny_ear.json", 128}, std::tuple{"box.obj", "box_bend.json", 64},
+                                                 std::tuple{"bar.obj", "bar_bend.json", 96}, std::tuple{"snowden_lo.obj", "snowden_nose.json", 96}}) {
+        SCOPED_TRACE(mesh);
+        DeformOptions options;
+        options.voxelize.resolution = resolution;
+        DeformReport report;
+        deform_mesh(read_mesh(test::data_path(mesh)), read_edit_file(test::data_path(edit)), options, report);
+        EXPECT_TRUE(report.thin_parts.empty()) << report.thin_parts[0].stage << " " << report.thin_parts[0].thickness_voxels;
+    }
+}
+
+TEST(ThinParts, ASlabAnEditSqueezesBelowAVoxelIsReported) {
+    // A 4 x 4 x 0.5 slab (4 voxels thick at 32), its right part pressed from 0.5 down to 0.07 thick.
+    const TriangleMesh slab = test::box_mesh({0, 0, 0}, {4, 4, 0.5}, 2);
+    EditScript script;
+    std::vector<Constraint> constraints;
+    for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < 5; ++j) {
+            const double x = 0.25 + 0.7 * i, y = 0.5 + 0.75 * j;
+            constraints.push_back(pin({x, y, 0}));
+            constraints.push_back(x > 2.2 ? move({x, y, 0.5}, {x, y, 0.07}) : pin({x, y, 0.5}));
+        }
+    script.edits.push_back({constraints});
+    DeformOptions options;
+    options.voxelize.resolution = 32;
+    DeformReport report;
+    deform_mesh(slab, script, options, report);
+    const double h = report.voxel_size;
+    ASSERT_FALSE(report.thin_parts.empty());
+    const ThinPart& part = report.thin_parts[0];
+    EXPECT_EQ(part.stage, "edits[0]");
+    EXPECT_NEAR(part.thickness_before_voxels, 0.5 / h, 0.05);
+    EXPECT_LT(part.thickness_voxels, 1.5);
+    EXPECT_GT(part.thickness_voxels, 0.07 / h / 2);
+    EXPECT_GT(part.centre.x(), 2.2);
+    EXPECT_LT(part.centre.z(), 0.2);
+    int explained = 0;
+    for (const auto& c : report.edits[0].constraints) explained += c.miss_cause.find("squeezes the part") != std::string::npos;
+    EXPECT_GT(explained, 0);
+    // Pressed everywhere, nothing is left: the error says what happened.
+    for (auto& c : script.edits[0].constraints)
+        if (c.kind == ConstraintKind::pin && c.point.z() > 0) c.kind = ConstraintKind::move, c.to = {c.point.x(), c.point.y(), 0.07};
+    DeformReport flat;
+    try {
+        deform_mesh(slab, script, options, flat);
+        ADD_FAILURE() << "expected InvalidInput";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("no surface left: edits[0] thins a part"), std::string::npos) << e.what();
+    }
+}
+
 TEST(EditFile, BundledExamplesParse) {
     for (const char* name : {"bunny_ear.json", "bar_bend.json", "snowden_nose.json", "box_bend.json", "box_twist.json"})
         EXPECT_NO_THROW(read_edit_file(test::data_path(name))) << name;

@@ -149,6 +149,12 @@
     status.className = '';
     status.textContent = 'resolution ' + resolution + ', ' + report.output_faces + ' faces, ' + Math.round(ms) + ' ms\n' +
       'volume ' + (report.volume_change_percent >= 0 ? '+' : '') + report.volume_change_percent.toFixed(2) + ' %';
+    (report.thin_parts || []).forEach(function (p) { // what the voxmap lost (README, "Reports")
+      status.className = 'warning';
+      status.textContent += '\n' + (p.stage === 'voxelize' ? 'voxelizing' : p.stage) + ' loses a part ' + p.thickness_voxels.toFixed(2) +
+        ' voxel thick near (' + p.centre.map(function (x) { return x.toPrecision(3); }).join(', ') + ')' +
+        (p.resolution_to_keep ? '; resolution ' + p.resolution_to_keep + ' keeps it' : '');
+    });
     const table = document.getElementById('residuals');
     table.innerHTML = '<tr><td>constraint</td><td>map</td><td>surface</td></tr>';
     const edit = report.edits && report.edits[report.edits.length - 1];

@@ -6,6 +6,8 @@
 #include <voxwarp/rigid.h>
 #include <voxwarp/surface_distance.h>
 
+#include "thin_parts.h"
+
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -135,8 +137,17 @@ std::vector<std::pair<double, bool>> measure_sources(const std::vector<Constrain
     return out;
 }
 
-/// Why the surface misses a move's target by more than half a voxel, where the measures tell.
-void explain_misses(EditReport& er) {
+/// The part of `parts` lost by `stage` whose bounds, grown by `margin`, hold the point, or null.
+const ThinPart* lost_under(const Eigen::Vector3d& point, const std::vector<ThinPart>& parts, const std::string& stage, double margin) {
+    for (const auto& p : parts)
+        if (p.stage == stage && (point.array() >= p.lo.array() - margin).all() && (point.array() <= p.hi.array() + margin).all()) return &p;
+    return nullptr;
+}
+
+/// Why the surface misses a move's target by more than half a voxel, where the measures tell; `parts` are the
+/// thin parts lost, once known, `stage` this edit's name among them, `h` the voxel size.
+void explain_misses(EditReport& er, const std::vector<Constraint>& constraints, double h, const std::vector<ThinPart>& parts = {},
+                    const std::string& stage = {}) {
     for (std::size_t c = 0; c < er.constraints.size(); ++c) {
         ConstraintReport& cr = er.constraints[c];
         cr.miss_cause.clear();
@@ -154,6 +165,8 @@ void explain_misses(EditReport& er) {
             std::snprintf(text, sizeof text,
                           "the point lies %.2f voxels off the voxelized surface (a sharp tip or edge the voxmap rounds off), and the edit carries that offset along",
                           cr.source_miss_voxels);
+        } else if (const ThinPart* part = lost_under(constraints[c].to, parts, stage, 1.5 * h)) {
+            std::snprintf(text, sizeof text, "the edit squeezes the part there to %.2f voxel, and the voxmap loses it (see thin parts)", part->thickness_voxels);
         } else if (cr.source_miss_voxels > 0.5) {
             std::snprintf(text, sizeof text, "the point lies %.2f voxels off the surface the edit starts from", cr.source_miss_voxels);
         } else {
@@ -170,8 +183,9 @@ void measure_targets(EditReport& er, const std::vector<Constraint>& constraints,
 }
 
 /// The edits of deform_voxmap; `model` (the input mesh, or null) tells how far the first edit's points lie from it.
+/// `probe`, when given, goes with the space through every step and is checked after each edit.
 SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report, const TriangleMesh* model,
-                       FeatureSurface* features = nullptr) {
+                       FeatureSurface* features = nullptr, SurfaceProbe* probe = nullptr) {
     Progress progress(options.progress, "deform");
     report.voxel_size = voxmap.voxel_size();
     report.dims = voxmap.dims();
@@ -227,14 +241,16 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
             progress.stage("warp edit " + std::to_string(e + 1) + "/" + std::to_string(script.edits.size()) +
                            (er.steps > 1 ? " step " + std::to_string(s + 1) + "/" + std::to_string(er.steps) : ""));
             if (features) push_feature_surface(domain.lattice, solution.lattice, *features); // the sharp parts go with the space
+            if (probe) probe->push(domain.lattice, solution.lattice, int(e));
             voxmap = warp(std::move(domain), solution.lattice, {.preview = options.preview, .progress = options.progress});
             report.seconds_warp += seconds_since(t);
             progress.report(double(s + 1) / er.steps);
         }
         report.seconds_solve += er.seconds_solve;
         er.volume_after = enclosed_volume(voxmap);
+        if (probe) probe->check(voxmap, int(e));
         measure_targets(er, constraints, voxmap);
-        explain_misses(er);
+        explain_misses(er, constraints, h);
         report.edits.push_back(std::move(er));
     }
     report.volume_after = enclosed_volume(voxmap);
@@ -269,7 +285,11 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     FeatureSurface features;
     const bool sharpen = options.extract.mesher == Mesher::features && options.extract.adaptivity == 0 && !options.extract.quads;
     if (sharpen) features = sharp_feature_surface(mesh, voxmap.voxel_size(), options.extract.feature_angle);
-    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh, sharpen && !features.empty() ? &features : nullptr);
+    // Surface the voxmap loses, on voxelizing and in each edit.
+    SurfaceProbe probe(mesh, voxmap.voxel_size());
+    probe.check(voxmap, SurfaceProbe::kVoxelize);
+    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh, sharpen && !features.empty() ? &features : nullptr, &probe);
+    report.thin_parts = probe.parts(options.voxelize.voxel_size > 0 ? bounds(mesh).size().maxCoeff() : options.voxelize.resolution * report.voxel_size);
     auto t = Clock::now();
     ExtractOptions eo = options.extract;
     eo.progress = options.progress;
@@ -277,7 +297,11 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     TriangleMesh out = extract(voxmap, eo);
     if (options.target_faces > 0) out = decimate(out, options.target_faces);
     report.seconds_extract = seconds_since(t);
-    if (out.face_count() == 0) throw InvalidInput("deform: the deformed volume has no surface left (was the model thinner than a voxel?)");
+    if (out.face_count() == 0) {
+        const auto warnings = deform_warnings(report); // the thin parts' come last
+        throw InvalidInput("deform: the deformed volume has no surface left" +
+                           (report.thin_parts.empty() ? std::string(" (was the model thinner than a voxel?)") : ": " + warnings.back()));
+    }
     // The last edit's misses against the surface the user gets (decimated or quads included).
     if (!report.edits.empty()) {
         EditReport& last = report.edits.back();
@@ -288,8 +312,9 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
                 const double d = distances_to_surface_within({constraints[c].to}, out, kMissReach * h)[0] / h;
                 last.constraints[c].surface_miss_voxels = d;
             }
-        explain_misses(last);
     }
+    for (std::size_t e = 0; e < report.edits.size(); ++e)
+        explain_misses(report.edits[e], script.edits[e].constraints, report.voxel_size, report.thin_parts, "edits[" + std::to_string(e) + "]");
     report.volume_before = enclosed_volume(mesh.quads.empty() ? mesh : mesh.triangulated());
     report.volume_after = enclosed_volume(out.quads.empty() ? out : out.triangulated());
     report.output_vertices = out.vertices.size();

@@ -67,6 +67,17 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
         }
         j["edits"].push_back(je);
     }
+    j["thin_parts"] = nlohmann::json::array();
+    for (const auto& p : r.thin_parts) {
+        j["thin_parts"].push_back({{"stage", p.stage},
+                                   {"centre", {p.centre.x(), p.centre.y(), p.centre.z()}},
+                                   {"bounds", {{p.lo.x(), p.lo.y(), p.lo.z()}, {p.hi.x(), p.hi.y(), p.hi.z()}}},
+                                   {"area_voxels", p.area_voxels},
+                                   {"thickness_voxels", p.thickness_voxels},
+                                   {"thickness_before_voxels", p.thickness_before_voxels},
+                                   {"voxel_size_to_keep", p.voxel_size_to_keep},
+                                   {"resolution_to_keep", p.resolution_to_keep > 0 ? nlohmann::json(p.resolution_to_keep) : nlohmann::json(nullptr)}});
+    }
     return j.dump(2) + "\n";
 }
 
@@ -96,6 +107,20 @@ std::vector<std::string> deform_warnings(const DeformReport& r) {
                              " region(s) (det J <= 0): the constraints ask for more than a fold-free map gives; move them apart or add pins");
         else if (e.folds_remain)
             out.emplace_back("an edit still folds the lattice map after " + std::to_string(e.steps) + " steps; raise --max-steps");
+    }
+    for (const auto& p : r.thin_parts) {
+        char keep[160];
+        if (p.resolution_to_keep > 0)
+            std::snprintf(keep, sizeof keep, "--resolution %lld (voxel size %.3g) would keep it", (long long)p.resolution_to_keep, p.voxel_size_to_keep);
+        else
+            std::snprintf(keep, sizeof keep, "a voxel size of %.3g would keep it, finer than any resolution voxwarp takes", p.voxel_size_to_keep);
+        if (p.stage == "voxelize")
+            std::snprintf(line, sizeof line, "a part %.2f voxel thick near (%.4g, %.4g, %.4g), %.0f voxels^2 of surface, is missing from the voxmap: %s",
+                          p.thickness_voxels, p.centre.x(), p.centre.y(), p.centre.z(), p.area_voxels, keep);
+        else
+            std::snprintf(line, sizeof line, "%s thins a part near (%.4g, %.4g, %.4g) from %.2f to %.2f voxel and loses it (%.0f voxels^2 of surface): %s",
+                          p.stage.c_str(), p.centre.x(), p.centre.y(), p.centre.z(), p.thickness_before_voxels, p.thickness_voxels, p.area_voxels, keep);
+        out.emplace_back(line);
     }
     return out;
 }

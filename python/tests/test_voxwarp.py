@@ -199,6 +199,19 @@ def test_feature_mesher_keeps_corners_and_matches_the_cli(tmp):
             call()
 
 
+def test_thin_parts_are_reported():
+    # A cube and a plate 0.3 voxel thick between two planes of voxel centres (resolution 24 over 5 units).
+    h = 5 / 24
+    V1, F1 = box((0, 0, 0), (2, 2, 2))
+    V2, F2 = box((3, 0.2, 4.35 * h), (5, 1.8, 4.65 * h))
+    V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)]).astype(np.int32)
+    _, _, report = voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0.0, 0.0, 0.0]}]}]}, resolution=24)
+    (part,) = report["thin_parts"]
+    assert part["stage"] == "voxelize" and abs(part["thickness_voxels"] - 0.3) < 0.02
+    assert np.linalg.norm(np.array(part["centre"]) - [4, 1, 4.5 * h]) < h
+    assert part["resolution_to_keep"] > 24
+
+
 def test_malformed_edit_dicts_name_their_json_path():
     V, F = box()
     with pytest.raises(voxwarp.InvalidInput, match=r'edit: edits\[0\]\.solver: expected "min-norm" or "rigid", got "arap"'):

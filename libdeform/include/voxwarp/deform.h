@@ -58,6 +58,21 @@ struct EditReport {
     std::vector<ConstraintReport> constraints;
 };
 
+/// A part of the model the voxmap lost: thinner than a voxel when voxelized (a flood fill keeps a part only where
+/// a voxel centre lies inside it; crumbs under three voxels are dropped), or squeezed below a voxel by an edit
+/// (the warp's box filter averages it under density 0.5). Found as input surface with no material near where
+/// the space took it; only parts thinner than 1.5 voxels where they were lost, with a voxel of area or more.
+struct ThinPart {
+    std::string stage;                   ///< "voxelize", or the edit that lost it: "edits[0]", ...
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero(); ///< world: in the input's frame for "voxelize", the edit's result's otherwise
+    Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero(); ///< its lost surface's bounds, same frame
+    double area_voxels = 0;              ///< lost surface area, voxels^2
+    double thickness_voxels = 0;         ///< how thick it was where it was lost (median over rays through it), voxels
+    double thickness_before_voxels = 0;  ///< how thick it is on the input, voxels
+    double voxel_size_to_keep = 0;       ///< world units: half its thickness (two voxels across keep it)
+    std::int64_t resolution_to_keep = 0; ///< --resolution giving that voxel size; 0 when above 8192
+};
+
 struct DeformReport {
     std::string mode = "volume";     ///< "volume" (re-polygonized) or "vertex" (classic FFD of the input's vertices)
     double voxel_size = 0;
@@ -67,6 +82,7 @@ struct DeformReport {
     double seconds_voxelize = 0, seconds_solve = 0, seconds_warp = 0, seconds_extract = 0;
     double seconds_read = 0, seconds_write = 0, seconds_total = 0; ///< filled by callers that read and write files
     std::size_t output_vertices = 0, output_faces = 0;
+    std::vector<ThinPart> thin_parts; ///< what the voxmap lost (mesh input, volume mode), largest first, at most 16
 };
 
 /// Apply every edit of `script` to a voxmap (each edit on a fresh lattice over the previous result).
@@ -84,7 +100,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
 TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report);
 
 /// Warnings a user should see about a finished run, one line each (no "warning:" prefix): constraints that miss
-/// their targets by more than half a voxel (with the cause where known), maps that still fold.
+/// their targets by more than half a voxel (with the cause where known), maps that still fold, thin parts lost.
 std::vector<std::string> deform_warnings(const DeformReport& report);
 
 /// The report as the JSON text `voxwarp deform --report` writes (schema in README.md, "Reports"). `fields` are

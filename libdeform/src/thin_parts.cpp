@@ -1,0 +1,247 @@
+// The parts of a model the voxmap loses. A closed mesh is voxelized by a flood fill, which keeps a part only
+// where a voxel centre lies inside it, so a plate or spike thinner than a voxel can vanish; the winding-number
+// path drops closed crumbs under three voxels; and the warp's box filter averages a part squeezed below a voxel
+// into density under 0.5. Each leaves the same trace: input surface with no material near where the space took it.
+#include "thin_parts.h"
+
+#include <voxwarp/warp.h>
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <unordered_map>
+
+namespace voxwarp::deform_internal {
+
+namespace {
+
+constexpr std::size_t kMaxSamples = 1 << 18;
+constexpr double kRayReach = 16;  // voxels: thicker than this is not thin, whatever the warp did
+constexpr double kThin = 1.5;     // voxels: thicker than this where it was lost, something else lost it
+constexpr std::size_t kMaxParts = 16;
+constexpr std::size_t kRays = 32; // per part
+
+/// Whether a voxel of density >= 0.5 lies among the 4^3 around the point (the cell it lies in first).
+bool holds_material(const SparseVoxmap& v, const Eigen::Vector3d& p) {
+    const Eigen::Vector3d x = v.index_of(p);
+    if (!x.allFinite()) return false;
+    const std::int64_t i = std::int64_t(std::floor(x.x())), j = std::int64_t(std::floor(x.y())), k = std::int64_t(std::floor(x.z()));
+    for (int dz = 0; dz <= 1; ++dz)
+        for (int dy = 0; dy <= 1; ++dy)
+            for (int dx = 0; dx <= 1; ++dx)
+                if (v.at(i + dx, j + dy, k + dz) >= 0.5f) return true;
+    for (int dz = -1; dz <= 2; ++dz)
+        for (int dy = -1; dy <= 2; ++dy)
+            for (int dx = -1; dx <= 2; ++dx)
+                if (v.at(i + dx, j + dy, k + dz) >= 0.5f) return true;
+    return false;
+}
+
+/// Distance along the ray to triangle (a, b, c), or +infinity (Moller-Trumbore, both sides).
+double ray_hit(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const Eigen::Vector3d e1 = b - a, e2 = c - a, p = d.cross(e2);
+    const double det = e1.dot(p);
+    if (std::abs(det) < 1e-300) return std::numeric_limits<double>::infinity();
+    const Eigen::Vector3d s = o - a;
+    const double u = s.dot(p) / det;
+    if (u < 0 || u > 1) return std::numeric_limits<double>::infinity();
+    const Eigen::Vector3d q = s.cross(e1);
+    const double v = d.dot(q) / det;
+    if (v < 0 || u + v > 1) return std::numeric_limits<double>::infinity();
+    const double t = e2.dot(q) / det;
+    return t > 0 ? t : std::numeric_limits<double>::infinity();
+}
+
+struct Disjoint {
+    std::vector<std::size_t> parent;
+    explicit Disjoint(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), std::size_t(0)); }
+    std::size_t find(std::size_t x) {
+        while (parent[x] != x) x = parent[x] = parent[parent[x]];
+        return x;
+    }
+    void join(std::size_t a, std::size_t b) { parent[find(a)] = find(b); }
+};
+
+double median(std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+    return v[v.size() / 2];
+}
+
+} // namespace
+
+SurfaceProbe::SurfaceProbe(const TriangleMesh& mesh, double voxel_size)
+    : mesh_(mesh), triangles_(all_triangles(mesh, storage_)), h_(voxel_size) {
+    const auto& V = mesh_.vertices;
+    const std::size_t faces = triangles_.size();
+    std::vector<double> areas(faces);
+    double total = 0;
+    for (std::size_t f = 0; f < faces; ++f) {
+        const auto& t = triangles_[f];
+        areas[f] = 0.5 * (V[std::size_t(t[1])] - V[std::size_t(t[0])]).cross(V[std::size_t(t[2])] - V[std::size_t(t[0])]).norm();
+        if (std::isfinite(areas[f])) total += areas[f];
+    }
+    // About a sample per voxel of area (fewer past kMaxSamples): a face larger than that cut into similar
+    // triangles, one sample at each one's centroid; smaller faces, in their order (which keeps neighbours
+    // together in meshes as they come), pooled until they hold that much area, the sample at the last one's centroid.
+    const double per_sample = std::max(h_ * h_, total / double(kMaxSamples));
+    double pooled = 0;
+    for (std::size_t f = 0; f < faces; ++f) {
+        const double a = areas[f];
+        if (!(a > 0) || !std::isfinite(a)) continue;
+        const auto& t = triangles_[f];
+        const Eigen::Vector3d &p0 = V[std::size_t(t[0])], &p1 = V[std::size_t(t[1])], &p2 = V[std::size_t(t[2])];
+        const Eigen::Vector3d n = (p1 - p0).cross(p2 - p0).normalized();
+        if (!n.allFinite()) continue;
+        int k = 1;
+        if (a >= per_sample) {
+            k = int(std::clamp(std::ceil(std::sqrt(a / per_sample)), 1.0, 1024.0));
+        } else if ((pooled += a) < per_sample) {
+            continue;
+        }
+        const double share = k == 1 && a < per_sample ? pooled : a / double(k * k);
+        if (a < per_sample) pooled = 0;
+        auto add = [&](double u, double v) { // the centroids of the face cut into k^2 similar triangles
+            rest_.push_back(p0 + u / k * (p1 - p0) + v / k * (p2 - p0));
+            normal_.push_back(n);
+            face_.push_back(std::int32_t(f));
+            area_.push_back(share);
+        };
+        for (int i = 0; i < k; ++i)
+            for (int j = 0; i + j < k; ++j) {
+                add(i + 1.0 / 3, j + 1.0 / 3);
+                if (i + j + 1 < k) add(i + 2.0 / 3, j + 2.0 / 3);
+            }
+    }
+    at_ = rest_;
+    lost_.assign(rest_.size(), kHeld);
+}
+
+void SurfaceProbe::push(const Lattice& rest, const Lattice& moved, int edit) {
+    push_points(rest, moved, at_);
+    steps_.emplace_back(edit, rest, moved);
+}
+
+void SurfaceProbe::check(const SparseVoxmap& voxmap, int stage) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, at_.size(), 4096), [&](const auto& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s)
+            if (lost_[s] == kHeld && !holds_material(voxmap, at_[s])) lost_[s] = stage;
+    });
+}
+
+Eigen::Vector3d SurfaceProbe::carry(Eigen::Vector3d p, int stage) const {
+    for (const auto& [edit, rest, moved] : steps_) {
+        if (edit > stage) break;
+        p = moved.evaluate(rest.parameter_of(p));
+    }
+    return p;
+}
+
+std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
+    std::vector<ThinPart> out;
+    const double h = h_;
+    std::vector<int> stages;
+    for (int s : lost_)
+        if (s != kHeld && std::find(stages.begin(), stages.end(), s) == stages.end()) stages.push_back(s);
+    std::sort(stages.begin(), stages.end());
+    for (const int stage : stages) {
+        // Group the stage's lost samples by 2-voxel cells touching one another.
+        std::vector<std::size_t> lost;
+        for (std::size_t s = 0; s < lost_.size(); ++s)
+            if (lost_[s] == stage) lost.push_back(s);
+        struct KeyHash {
+            std::size_t operator()(const std::array<std::int64_t, 3>& k) const {
+                return std::size_t(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
+            }
+        };
+        std::unordered_map<std::array<std::int64_t, 3>, std::size_t, KeyHash> cells;
+        std::vector<std::size_t> cell_of(lost.size());
+        for (std::size_t i = 0; i < lost.size(); ++i) {
+            const Eigen::Vector3d c = at_[lost[i]] / (2 * h);
+            const std::array<std::int64_t, 3> key{std::int64_t(std::floor(c.x())), std::int64_t(std::floor(c.y())), std::int64_t(std::floor(c.z()))};
+            cell_of[i] = cells.emplace(key, cells.size()).first->second;
+        }
+        Disjoint groups(cells.size());
+        for (const auto& [key, id] : cells)
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const auto it = cells.find({key[0] + dx, key[1] + dy, key[2] + dz});
+                        if (it != cells.end()) groups.join(id, it->second);
+                    }
+        // Groups in the order of their first sample, largest area first, at most kMaxParts * 4 measured.
+        std::unordered_map<std::size_t, std::size_t> ordinal;
+        std::vector<std::vector<std::size_t>> members;
+        std::vector<double> group_area;
+        for (std::size_t i = 0; i < lost.size(); ++i) {
+            const auto [it, fresh] = ordinal.emplace(groups.find(cell_of[i]), members.size());
+            if (fresh) members.emplace_back(), group_area.push_back(0);
+            members[it->second].push_back(lost[i]);
+            group_area[it->second] += area_[lost[i]];
+        }
+        std::vector<std::size_t> order(members.size());
+        std::iota(order.begin(), order.end(), std::size_t(0));
+        std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return group_area[a] > group_area[b]; });
+        if (order.size() > 4 * kMaxParts) order.resize(4 * kMaxParts);
+        for (const std::size_t g : order) {
+            const std::vector<std::size_t>& samples = members[g];
+            ThinPart part;
+            part.stage = stage == kVoxelize ? "voxelize" : "edits[" + std::to_string(stage) + "]";
+            double area = 0;
+            Eigen::Vector3d centre = Eigen::Vector3d::Zero(), lo = at_[samples[0]], hi = lo;
+            Eigen::Vector3d rest_lo = rest_[samples[0]], rest_hi = rest_lo;
+            for (std::size_t s : samples) {
+                area += area_[s];
+                centre += area_[s] * at_[s];
+                lo = lo.cwiseMin(at_[s]), hi = hi.cwiseMax(at_[s]);
+                rest_lo = rest_lo.cwiseMin(rest_[s]), rest_hi = rest_hi.cwiseMax(rest_[s]);
+            }
+            part.area_voxels = area / (h * h);
+            if (part.area_voxels < 1) continue; // a voxel of surface at least: less is a sample's noise
+            part.centre = centre / area, part.lo = lo, part.hi = hi;
+            // How thick it was: rays into the input from some of its samples, to the far side of the material.
+            std::vector<std::size_t> near;
+            const Eigen::Vector3d reach = Eigen::Vector3d::Constant(kRayReach * h);
+            for (std::size_t f = 0; f < triangles_.size(); ++f) {
+                const auto& t = triangles_[f];
+                const Eigen::Vector3d &a = mesh_.vertices[std::size_t(t[0])], &b = mesh_.vertices[std::size_t(t[1])], &c = mesh_.vertices[std::size_t(t[2])];
+                const Eigen::Vector3d flo = a.cwiseMin(b).cwiseMin(c), fhi = a.cwiseMax(b).cwiseMax(c);
+                if ((flo.array() <= (rest_hi + reach).array()).all() && (fhi.array() >= (rest_lo - reach).array()).all()) near.push_back(f);
+            }
+            std::vector<double> after, before;
+            const std::size_t rays = std::min(kRays, samples.size());
+            for (std::size_t r = 0; r < rays; ++r) {
+                const std::size_t s = samples[r * samples.size() / rays];
+                const Eigen::Vector3d d = -normal_[s];
+                double best = std::numeric_limits<double>::infinity();
+                for (std::size_t f : near) {
+                    if (std::int32_t(f) == face_[s]) continue;
+                    const auto& t = triangles_[f];
+                    best = std::min(best, ray_hit(rest_[s], d, mesh_.vertices[std::size_t(t[0])], mesh_.vertices[std::size_t(t[1])],
+                                                  mesh_.vertices[std::size_t(t[2])]));
+                }
+                if (!(best <= kRayReach * h)) continue;
+                before.push_back(best / h);
+                after.push_back((carry(rest_[s] + best * d, stage) - at_[s]).norm() / h);
+            }
+            // Most rays find no far side: an open sheet or a stray piece, which encloses nothing to keep.
+            if (2 * after.size() < rays) continue;
+            part.thickness_voxels = median(after);
+            part.thickness_before_voxels = median(before);
+            if (part.thickness_voxels > kThin) continue;
+            // Two voxels across keep it (a voxel centre inside it, whatever its orientation; density over 0.5
+            // after the warp's box filter).
+            part.voxel_size_to_keep = std::max(part.thickness_voxels, 1e-3) * h / 2;
+            const double resolution = std::ceil(longest_side / part.voxel_size_to_keep);
+            part.resolution_to_keep = resolution <= 8192 ? std::int64_t(resolution) : 0;
+            out.push_back(std::move(part));
+        }
+    }
+    std::stable_sort(out.begin(), out.end(), [](const ThinPart& a, const ThinPart& b) { return a.area_voxels > b.area_voxels; });
+    if (out.size() > kMaxParts) out.resize(kMaxParts);
+    return out;
+}
+
+} // namespace voxwarp::deform_internal
