@@ -65,6 +65,10 @@ struct Disjoint {
     void join(std::size_t a, std::size_t b) { parent[find(a)] = find(b); }
 };
 
+struct KeyHash {
+    std::size_t operator()(const std::array<std::int64_t, 3>& k) const { return std::size_t(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791); }
+};
+
 double median(std::vector<double> v) {
     std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
     return v[v.size() / 2];
@@ -151,11 +155,6 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
         std::vector<std::size_t> lost;
         for (std::size_t s = 0; s < lost_.size(); ++s)
             if (lost_[s] == stage) lost.push_back(s);
-        struct KeyHash {
-            std::size_t operator()(const std::array<std::int64_t, 3>& k) const {
-                return std::size_t(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791);
-            }
-        };
         std::unordered_map<std::array<std::int64_t, 3>, std::size_t, KeyHash> cells;
         std::vector<std::size_t> cell_of(lost.size());
         for (std::size_t i = 0; i < lost.size(); ++i) {
@@ -171,7 +170,7 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
                         const auto it = cells.find({key[0] + dx, key[1] + dy, key[2] + dz});
                         if (it != cells.end()) groups.join(id, it->second);
                     }
-        // Groups in the order of their first sample, largest area first, at most kMaxParts * 4 measured.
+        // Groups in the order of their first sample, largest area first, at most 2 kMaxParts measured.
         std::unordered_map<std::size_t, std::size_t> ordinal;
         std::vector<std::vector<std::size_t>> members;
         std::vector<double> group_area;
@@ -184,7 +183,7 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
         std::vector<std::size_t> order(members.size());
         std::iota(order.begin(), order.end(), std::size_t(0));
         std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return group_area[a] > group_area[b]; });
-        if (order.size() > 4 * kMaxParts) order.resize(4 * kMaxParts);
+        if (order.size() > 2 * kMaxParts) order.resize(2 * kMaxParts);
         for (const std::size_t g : order) {
             const std::vector<std::size_t>& samples = members[g];
             ThinPart part;
@@ -210,18 +209,50 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
                 const Eigen::Vector3d flo = a.cwiseMin(b).cwiseMin(c), fhi = a.cwiseMax(b).cwiseMax(c);
                 if ((flo.array() <= (rest_hi + reach).array()).all() && (fhi.array() >= (rest_lo - reach).array()).all()) near.push_back(f);
             }
+            // The candidates by 4-voxel cells (a ray reaches 16 voxels: at most 5 cells per axis); the few faces
+            // larger than 8 cells are tried by every ray.
+            const double cell = 4 * h;
+            auto cell_of = [&](const Eigen::Vector3d& p) {
+                return std::array<std::int64_t, 3>{std::int64_t(std::floor(p.x() / cell)), std::int64_t(std::floor(p.y() / cell)), std::int64_t(std::floor(p.z() / cell))};
+            };
+            std::unordered_map<std::array<std::int64_t, 3>, std::vector<std::uint32_t>, KeyHash> by_cell;
+            std::vector<std::uint32_t> large;
+            for (std::uint32_t i = 0; i < near.size(); ++i) {
+                const auto& t = triangles_[near[i]];
+                const Eigen::Vector3d &a = mesh_.vertices[std::size_t(t[0])], &b = mesh_.vertices[std::size_t(t[1])], &c = mesh_.vertices[std::size_t(t[2])];
+                const auto lo_cell = cell_of(a.cwiseMin(b).cwiseMin(c)), hi_cell = cell_of(a.cwiseMax(b).cwiseMax(c));
+                if (hi_cell[0] - lo_cell[0] > 8 || hi_cell[1] - lo_cell[1] > 8 || hi_cell[2] - lo_cell[2] > 8) {
+                    large.push_back(i);
+                    continue;
+                }
+                for (auto z = lo_cell[2]; z <= hi_cell[2]; ++z)
+                    for (auto y = lo_cell[1]; y <= hi_cell[1]; ++y)
+                        for (auto x = lo_cell[0]; x <= hi_cell[0]; ++x) by_cell[{x, y, z}].push_back(i);
+            }
+            std::vector<std::size_t> tried(near.size(), std::size_t(-1)); // the ray that last tried each candidate
             std::vector<double> after, before;
             const std::size_t rays = std::min(kRays, samples.size());
             for (std::size_t r = 0; r < rays; ++r) {
                 const std::size_t s = samples[r * samples.size() / rays];
                 const Eigen::Vector3d d = -normal_[s];
                 double best = std::numeric_limits<double>::infinity();
-                for (std::size_t f : near) {
-                    if (std::int32_t(f) == face_[s]) continue;
-                    const auto& t = triangles_[f];
+                auto try_face = [&](std::uint32_t i) {
+                    if (tried[i] == r || std::int32_t(near[i]) == face_[s]) return;
+                    tried[i] = r;
+                    const auto& t = triangles_[near[i]];
                     best = std::min(best, ray_hit(rest_[s], d, mesh_.vertices[std::size_t(t[0])], mesh_.vertices[std::size_t(t[1])],
                                                   mesh_.vertices[std::size_t(t[2])]));
-                }
+                };
+                for (std::uint32_t i : large) try_face(i);
+                const Eigen::Vector3d end = rest_[s] + kRayReach * h * d;
+                const auto lo_cell = cell_of(rest_[s].cwiseMin(end)), hi_cell = cell_of(rest_[s].cwiseMax(end));
+                for (auto z = lo_cell[2]; z <= hi_cell[2]; ++z)
+                    for (auto y = lo_cell[1]; y <= hi_cell[1]; ++y)
+                        for (auto x = lo_cell[0]; x <= hi_cell[0]; ++x) {
+                            const auto it = by_cell.find({x, y, z});
+                            if (it != by_cell.end())
+                                for (std::uint32_t i : it->second) try_face(i);
+                        }
                 if (!(best <= kRayReach * h)) continue;
                 before.push_back(best / h);
                 after.push_back((carry(rest_[s] + best * d, stage) - at_[s]).norm() / h);
