@@ -18,7 +18,8 @@ namespace voxwarp::deform_internal {
 
 namespace {
 
-constexpr std::size_t kMaxSamples = 1 << 18;
+constexpr std::size_t kMaxSamples = 1 << 17;
+constexpr double kAreaPerSample = 2;  // voxels^2 of surface per sample; parts of less area are not reported
 constexpr double kRayReach = 16;  // voxels: thicker than this is not thin, whatever the warp did
 constexpr double kThin = 1.5;     // voxels: thicker than this where it was lost, something else lost it
 constexpr std::size_t kMaxParts = 16;
@@ -80,47 +81,66 @@ SurfaceProbe::SurfaceProbe(const TriangleMesh& mesh, double voxel_size)
     : mesh_(mesh), triangles_(all_triangles(mesh, storage_)), h_(voxel_size) {
     const auto& V = mesh_.vertices;
     const std::size_t faces = triangles_.size();
+    std::vector<Eigen::Vector3d> normals(faces);
     std::vector<double> areas(faces);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, faces, 4096), [&](const auto& r) {
+        for (std::size_t f = r.begin(); f != r.end(); ++f) {
+            const auto& t = triangles_[f];
+            const Eigen::Vector3d n = (V[std::size_t(t[1])] - V[std::size_t(t[0])]).cross(V[std::size_t(t[2])] - V[std::size_t(t[0])]);
+            const double a = 0.5 * n.norm();
+            const bool usable = a > 0 && std::isfinite(a) && n.allFinite();
+            areas[f] = usable ? a : 0.0, normals[f] = usable ? Eigen::Vector3d(n / (2 * a)) : Eigen::Vector3d::Zero();
+        }
+    });
     double total = 0;
-    for (std::size_t f = 0; f < faces; ++f) {
-        const auto& t = triangles_[f];
-        areas[f] = 0.5 * (V[std::size_t(t[1])] - V[std::size_t(t[0])]).cross(V[std::size_t(t[2])] - V[std::size_t(t[0])]).norm();
-        if (std::isfinite(areas[f])) total += areas[f];
-    }
-    // About a sample per voxel of area (fewer past kMaxSamples): a face larger than that cut into similar
-    // triangles, one sample at each one's centroid; smaller faces, in their order (which keeps neighbours
-    // together in meshes as they come), pooled until they hold that much area, the sample at the last one's centroid.
-    const double per_sample = std::max(h_ * h_, total / double(kMaxSamples));
-    double pooled = 0;
+    for (double a : areas) total += a;
+    // A sample per kAreaPerSample voxels of area (fewer past kMaxSamples): a face larger than that is cut into
+    // k^2 similar triangles, a sample at each one's centroid; smaller faces, in their order (which keeps
+    // neighbours together in meshes as they come), take a sample at their centroid each time the running sum of
+    // their areas passes a multiple of that.
+    const double per_sample = std::max(kAreaPerSample * h_ * h_, total / double(kMaxSamples));
+    std::vector<std::uint32_t> first(faces + 1, 0); // samples of faces before f
+    std::vector<int> cut(faces, 0);                 // k, or 0 for a small face
+    double small = 0;
     for (std::size_t f = 0; f < faces; ++f) {
         const double a = areas[f];
-        if (!(a > 0) || !std::isfinite(a)) continue;
-        const auto& t = triangles_[f];
-        const Eigen::Vector3d &p0 = V[std::size_t(t[0])], &p1 = V[std::size_t(t[1])], &p2 = V[std::size_t(t[2])];
-        const Eigen::Vector3d n = (p1 - p0).cross(p2 - p0).normalized();
-        if (!n.allFinite()) continue;
-        int k = 1;
+        std::uint32_t count = 0;
         if (a >= per_sample) {
-            k = int(std::clamp(std::ceil(std::sqrt(a / per_sample)), 1.0, 1024.0));
-        } else if ((pooled += a) < per_sample) {
-            continue;
+            cut[f] = int(std::clamp(std::ceil(std::sqrt(a / per_sample)), 1.0, 1024.0));
+            count = std::uint32_t(cut[f] * cut[f]);
+        } else if (a > 0) {
+            count = std::uint32_t(std::floor((small + a) / per_sample) - std::floor(small / per_sample));
+            small += a;
         }
-        const double share = k == 1 && a < per_sample ? pooled : a / double(k * k);
-        if (a < per_sample) pooled = 0;
-        auto add = [&](double u, double v) { // the centroids of the face cut into k^2 similar triangles
-            rest_.push_back(p0 + u / k * (p1 - p0) + v / k * (p2 - p0));
-            normal_.push_back(n);
-            face_.push_back(std::int32_t(f));
-            area_.push_back(share);
-        };
-        for (int i = 0; i < k; ++i)
-            for (int j = 0; i + j < k; ++j) {
-                add(i + 1.0 / 3, j + 1.0 / 3);
-                if (i + j + 1 < k) add(i + 2.0 / 3, j + 2.0 / 3);
-            }
+        first[f + 1] = first[f] + count;
     }
+    const std::size_t n = first[faces];
+    rest_.resize(n), normal_.resize(n), face_.resize(n), area_.resize(n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, faces, 4096), [&](const auto& r) {
+        for (std::size_t f = r.begin(); f != r.end(); ++f) {
+            std::size_t s = first[f];
+            if (s == first[f + 1]) continue;
+            const auto& t = triangles_[f];
+            const Eigen::Vector3d &p0 = V[std::size_t(t[0])], &p1 = V[std::size_t(t[1])], &p2 = V[std::size_t(t[2])];
+            auto add = [&](double u, double v, double share) {
+                rest_[s] = p0 + u * (p1 - p0) + v * (p2 - p0), normal_[s] = normals[f], face_[s] = std::int32_t(f), area_[s] = share;
+                ++s;
+            };
+            const int k = cut[f];
+            if (k == 0) { // a small face: the area it closed the count with
+                for (std::size_t i = first[f]; i < first[f + 1]; ++i) add(1.0 / 3, 1.0 / 3, per_sample);
+                continue;
+            }
+            const double share = areas[f] / double(k * k);
+            for (int i = 0; i < k; ++i)
+                for (int j = 0; i + j < k; ++j) { // the centroids of the face cut into k^2 similar triangles
+                    add((i + 1.0 / 3) / k, (j + 1.0 / 3) / k, share);
+                    if (i + j + 1 < k) add((i + 2.0 / 3) / k, (j + 2.0 / 3) / k, share);
+                }
+        }
+    });
     at_ = rest_;
-    lost_.assign(rest_.size(), kHeld);
+    lost_.assign(n, kHeld);
 }
 
 void SurfaceProbe::push(const Lattice& rest, const Lattice& moved, int edit) {
@@ -198,7 +218,7 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
                 rest_lo = rest_lo.cwiseMin(rest_[s]), rest_hi = rest_hi.cwiseMax(rest_[s]);
             }
             part.area_voxels = area / (h * h);
-            if (part.area_voxels < 1) continue; // a voxel of surface at least: less is a sample's noise
+            if (part.area_voxels < kAreaPerSample) continue; // a sample's area at least: less is noise
             part.centre = centre / area, part.lo = lo, part.hi = hi;
             // How thick it was: rays into the input from some of its samples, to the far side of the material.
             std::vector<std::size_t> near;

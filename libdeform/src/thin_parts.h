@@ -10,7 +10,7 @@
 
 namespace voxwarp::deform_internal {
 
-/// Samples of the input mesh's surface (about one per voxel of area), carried through every step of every edit
+/// Samples of the input mesh's surface (one per two voxels of area), carried through every step of every edit
 /// as the space is, and checked against the voxmap each stage leaves: a sample with no voxel of density >= 0.5
 /// within about a voxel and a half is surface the voxmap no longer holds. Lost samples are grouped into parts,
 /// whose thickness (where it was lost) is measured by rays through the input mesh carried the same way.

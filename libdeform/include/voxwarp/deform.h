@@ -61,7 +61,7 @@ struct EditReport {
 /// A part of the model the voxmap lost: thinner than a voxel when voxelized (a flood fill keeps a part only where
 /// a voxel centre lies inside it; crumbs under three voxels are dropped), or squeezed below a voxel by an edit
 /// (the warp's box filter averages it under density 0.5). Found as input surface with no material near where
-/// the space took it; only parts thinner than 1.5 voxels where they were lost, with a voxel of area or more.
+/// the space took it; only parts thinner than 1.5 voxels where they were lost, with two voxels^2 of area or more.
 struct ThinPart {
     std::string stage;                   ///< "voxelize", or the edit that lost it: "edits[0]", ...
     Eigen::Vector3d centre = Eigen::Vector3d::Zero(); ///< world: in the input's frame for "voxelize", the edit's result's otherwise
