@@ -42,29 +42,28 @@ const RigidCase& rigid_case(int which) {
 
 } // namespace
 
-static void BM_SolveRigid(benchmark::State& state, int which) {
+/// Times `solve` on one case, and records its iterations.
+template <class Solve>
+void time_solve(benchmark::State& state, int which, Solve solve) {
     const RigidCase& c = rigid_case(which);
     int iterations = 0;
     for (auto _ : state) {
-        const RigidSolution s = solve_rigid(c.rest, c.constraints, c.material);
+        const RigidSolution s = solve(c);
         iterations = s.iterations;
         benchmark::DoNotOptimize(s.lattice.points().data());
     }
     state.counters["iterations"] = iterations;
+}
+
+static void BM_SolveRigid(benchmark::State& state, int which) {
+    time_solve(state, which, [](const RigidCase& c) { return solve_rigid(c.rest, c.constraints, c.material); });
 }
 BENCHMARK_CAPTURE(BM_SolveRigid, bar_bend, 0)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_SolveRigid, bar_twist, 1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_SolveRigid, bunny_ear, 2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 static void BM_SolveRigidGraphCeres(benchmark::State& state, int which) {
-    const RigidCase& c = rigid_case(which);
-    int iterations = 0;
-    for (auto _ : state) {
-        const RigidSolution s = solve_rigid_graph_ceres(c.rest, c.constraints, c.material);
-        iterations = s.iterations;
-        benchmark::DoNotOptimize(s.lattice.points().data());
-    }
-    state.counters["iterations"] = iterations;
+    time_solve(state, which, [](const RigidCase& c) { return solve_rigid_graph_ceres(c.rest, c.constraints, c.material); });
 }
 BENCHMARK_CAPTURE(BM_SolveRigidGraphCeres, bar_bend, 0)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
