@@ -4,6 +4,7 @@
 // into density under 0.5. Each leaves the same trace: input surface with no material near where the space took it.
 #include "thin_parts.h"
 
+#include <voxwarp/errors.h>
 #include <voxwarp/warp.h>
 
 #include <tbb/parallel_for.h>
@@ -274,8 +275,12 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
                                 for (std::uint32_t i : it->second) try_face(i);
                         }
                 if (!(best <= kRayReach * h)) continue;
-                before.push_back(best / h);
-                after.push_back((carry(rest_[s] + best * d, stage) - at_[s]).norm() / h);
+                try {
+                    after.push_back((carry(rest_[s] + best * d, stage) - at_[s]).norm() / h);
+                    before.push_back(best / h);
+                } catch (const SolverFailure&) {
+                    // the far side lies where a clamped lattice's map cannot be inverted: this ray tells nothing
+                }
             }
             // Most rays find no far side: an open sheet or a stray piece, which encloses nothing to keep.
             if (2 * after.size() < rays) continue;
