@@ -6,9 +6,11 @@ README's set-up:
 
 Every picture is made by `voxwarp render` (three.js in headless Chromium); the editor's by selenium.
 """
+import atexit
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -24,6 +26,7 @@ out = os.path.join(root, "docs", "pictures")
 data = os.path.join(root, "data")
 os.makedirs(out, exist_ok=True)
 work = tempfile.mkdtemp(prefix="voxwarp-pictures-")
+atexit.register(shutil.rmtree, work, ignore_errors=True)
 
 
 def run(*args):
