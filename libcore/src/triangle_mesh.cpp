@@ -1,9 +1,9 @@
 #include <voxwarp/errors.h>
 #include <voxwarp/triangle_mesh.h>
+#include <voxwarp_internal/geometry.h>
 
 #include <algorithm>
 #include <limits>
-#include <numeric>
 #include <unordered_map>
 
 namespace voxwarp {
@@ -64,20 +64,6 @@ Bounds bounds(const TriangleMesh& mesh) {
     return b;
 }
 
-namespace {
-
-struct UnionFind {
-    std::vector<std::int64_t> parent;
-    explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
-    std::int64_t find(std::int64_t x) {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    }
-    void unite(std::int64_t a, std::int64_t b) { parent[find(a)] = find(b); }
-};
-
-} // namespace
-
 MeshTopology topology(const TriangleMesh& input) {
     TriangleMesh storage;
     const auto& tris = all_triangles(input, storage);
@@ -94,7 +80,7 @@ MeshTopology topology(const TriangleMesh& input) {
     std::unordered_map<std::uint64_t, EdgeInfo> edges;
     edges.reserve(tris.size() * 2);
     std::vector<char> used(nv, 0);
-    UnionFind faces_uf(tris.size());
+    internal::DisjointSets faces_uf(tris.size());
     std::vector<std::int64_t> vertex_face(nv, -1);
     for (std::size_t f = 0; f < tris.size(); ++f) {
         const auto& tri = tris[f];
@@ -102,7 +88,7 @@ MeshTopology topology(const TriangleMesh& input) {
         for (int c = 0; c < 3; ++c) {
             const std::uint32_t a = std::uint32_t(tri[c]), b = std::uint32_t(tri[(c + 1) % 3]);
             used[a] = 1;
-            if (vertex_face[a] >= 0) faces_uf.unite(std::int64_t(f), vertex_face[a]);
+            if (vertex_face[a] >= 0) faces_uf.join(f, std::size_t(vertex_face[a]));
             vertex_face[a] = std::int64_t(f);
             if (a == b) continue;
             const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
@@ -122,7 +108,7 @@ MeshTopology topology(const TriangleMesh& input) {
 
     std::vector<char> root_seen(tris.size(), 0);
     for (std::size_t f = 0; f < tris.size(); ++f) {
-        const auto r = faces_uf.find(std::int64_t(f));
+        const auto r = faces_uf.find(f);
         if (!root_seen[r]) root_seen[r] = 1, ++t.components;
     }
 
@@ -134,18 +120,18 @@ MeshTopology topology(const TriangleMesh& input) {
     for (std::size_t v = 0; v < nv; ++v) {
         const auto& fs = incident[v];
         if (fs.size() < 2) continue;
-        UnionFind fan(fs.size());
+        internal::DisjointSets fan(fs.size());
         std::unordered_map<std::int32_t, std::size_t> first_with_neighbour;
         for (std::size_t a = 0; a < fs.size(); ++a)
             for (int c = 0; c < 3; ++c) {
                 const std::int32_t w = tris[fs[a]][c];
                 if (w == std::int32_t(v)) continue;
                 auto [it, inserted] = first_with_neighbour.try_emplace(w, a);
-                if (!inserted) fan.unite(std::int64_t(a), std::int64_t(it->second));
+                if (!inserted) fan.join(a, it->second);
             }
         std::int64_t groups = 0;
         for (std::size_t a = 0; a < fs.size(); ++a)
-            if (fan.find(std::int64_t(a)) == std::int64_t(a)) ++groups;
+            if (fan.find(a) == a) ++groups;
         if (groups > 1) ++t.nonmanifold_vertices;
     }
     return t;

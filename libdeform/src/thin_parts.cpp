@@ -6,6 +6,7 @@
 
 #include <voxwarp/errors.h>
 #include <voxwarp/warp.h>
+#include <voxwarp_internal/geometry.h>
 
 #include <tbb/parallel_for.h>
 
@@ -41,31 +42,6 @@ bool holds_material(const SparseVoxmap& v, const Eigen::Vector3d& p) {
                 if (v.at(i + dx, j + dy, k + dz) >= 0.5f) return true;
     return false;
 }
-
-/// Distance along the ray to triangle (a, b, c), or +infinity (Moller-Trumbore, both sides).
-double ray_hit(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-    const Eigen::Vector3d e1 = b - a, e2 = c - a, p = d.cross(e2);
-    const double det = e1.dot(p);
-    if (std::abs(det) < 1e-300) return std::numeric_limits<double>::infinity();
-    const Eigen::Vector3d s = o - a;
-    const double u = s.dot(p) / det;
-    if (u < 0 || u > 1) return std::numeric_limits<double>::infinity();
-    const Eigen::Vector3d q = s.cross(e1);
-    const double v = d.dot(q) / det;
-    if (v < 0 || u + v > 1) return std::numeric_limits<double>::infinity();
-    const double t = e2.dot(q) / det;
-    return t > 0 ? t : std::numeric_limits<double>::infinity();
-}
-
-struct Disjoint {
-    std::vector<std::size_t> parent;
-    explicit Disjoint(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), std::size_t(0)); }
-    std::size_t find(std::size_t x) {
-        while (parent[x] != x) x = parent[x] = parent[parent[x]];
-        return x;
-    }
-    void join(std::size_t a, std::size_t b) { parent[find(a)] = find(b); }
-};
 
 struct KeyHash {
     std::size_t operator()(const std::array<std::int64_t, 3>& k) const { return std::size_t(k[0] * 73856093 ^ k[1] * 19349663 ^ k[2] * 83492791); }
@@ -183,7 +159,7 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
             const std::array<std::int64_t, 3> key{std::int64_t(std::floor(c.x())), std::int64_t(std::floor(c.y())), std::int64_t(std::floor(c.z()))};
             cell_of[i] = cells.emplace(key, cells.size()).first->second;
         }
-        Disjoint groups(cells.size());
+        internal::DisjointSets groups(cells.size());
         for (const auto& [key, id] : cells)
             for (int dz = -1; dz <= 1; ++dz)
                 for (int dy = -1; dy <= 1; ++dy)
@@ -261,8 +237,9 @@ std::vector<ThinPart> SurfaceProbe::parts(double longest_side) const {
                     if (tried[i] == r || std::int32_t(near[i]) == face_[s]) return;
                     tried[i] = r;
                     const auto& t = triangles_[near[i]];
-                    best = std::min(best, ray_hit(rest_[s], d, mesh_.vertices[std::size_t(t[0])], mesh_.vertices[std::size_t(t[1])],
-                                                  mesh_.vertices[std::size_t(t[2])]));
+                    const double hit = internal::line_meets_triangle(rest_[s], d, mesh_.vertices[std::size_t(t[0])], mesh_.vertices[std::size_t(t[1])],
+                                                                     mesh_.vertices[std::size_t(t[2])]);
+                    if (hit > 0) best = std::min(best, hit);
                 };
                 for (std::uint32_t i : large) try_face(i);
                 const Eigen::Vector3d end = rest_[s] + kRayReach * h * d;

@@ -4,13 +4,14 @@
 // mesh it starts from (every vertex on a grid edge, every triangle inside one cell).
 #include "features.h"
 
+#include <voxwarp_internal/geometry.h>
+
 #include <Eigen/SVD>
 
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <map>
 #include <memory>
 #include <limits>
@@ -44,7 +45,7 @@ public:
         }
     }
     /// Where the segment a -> b meets the surface (parameter t in [0, 1] and the face's unit normal), the meeting
-    /// nearest to `near_t` (Moeller & Trumbore); false when it meets none of the triangles in the voxels given.
+    /// nearest to `near_t`; false when it meets none of the triangles in the voxels given.
     bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<std::uint64_t, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
         const Eigen::Vector3d d = b - a;
         double best = std::numeric_limits<double>::infinity();
@@ -54,20 +55,11 @@ public:
             for (std::uint32_t t : it->second) {
                 const auto& f = surface_.triangles[t];
                 const Eigen::Vector3d &p = surface_.vertices[std::size_t(f[0])], &q = surface_.vertices[std::size_t(f[1])], &r = surface_.vertices[std::size_t(f[2])];
-                const Eigen::Vector3d e1 = q - p, e2 = r - p, s = d.cross(e2);
-                const double det = e1.dot(s);
-                if (std::abs(det) < 1e-300) continue;
-                const Eigen::Vector3d o = a - p;
-                const double u = o.dot(s) / det;
-                if (u < -1e-9 || u > 1 + 1e-9) continue;
-                const Eigen::Vector3d k = o.cross(e1);
-                const double w = d.dot(k) / det;
-                if (w < -1e-9 || u + w > 1 + 1e-9) continue;
-                const double t_hit = e2.dot(k) / det;
-                if (t_hit < 0 || t_hit > 1 || std::abs(t_hit - near_t) >= best) continue;
+                const double t_hit = internal::line_meets_triangle(a, d, p, q, r, 1e-9);
+                if (!(t_hit >= 0 && t_hit <= 1) || std::abs(t_hit - near_t) >= best) continue;
                 best = std::abs(t_hit - near_t);
                 t_out = t_hit;
-                normal = e1.cross(e2).normalized();
+                normal = (q - p).cross(r - p).normalized();
             }
         }
         return std::isfinite(best);
@@ -317,17 +309,15 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     std::vector<Loop> features;
     for (const auto& [key, faces] : cell_triangles) {
         const Index3 cell{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
-        std::vector<int> parent(faces.size());
-        for (std::size_t i = 0; i < faces.size(); ++i) parent[i] = int(i);
-        std::function<int(int)> root = [&](int i) { return parent[std::size_t(i)] == i ? i : parent[std::size_t(i)] = root(parent[std::size_t(i)]); };
-        std::map<std::int32_t, int> owner;
+        internal::DisjointSets joined_faces(faces.size());
+        std::map<std::int32_t, std::size_t> owner;
         for (std::size_t i = 0; i < faces.size(); ++i)
             for (auto v : mesh.triangles[faces[i]]) {
-                auto [it, inserted] = owner.try_emplace(v, int(i));
-                if (!inserted) parent[std::size_t(root(int(i)))] = root(it->second);
+                auto [it, inserted] = owner.try_emplace(v, i);
+                if (!inserted) joined_faces.join(i, it->second);
             }
-        std::map<int, std::vector<std::uint32_t>> loops;
-        for (std::size_t i = 0; i < faces.size(); ++i) loops[root(int(i))].push_back(faces[i]);
+        std::map<std::size_t, std::vector<std::uint32_t>> loops;
+        for (std::size_t i = 0; i < faces.size(); ++i) loops[joined_faces.find(i)].push_back(faces[i]);
         for (auto& [r, loop] : loops) {
             std::vector<Eigen::Vector3d> points, ns;
             std::set<std::int32_t> seen;
@@ -360,9 +350,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     }
     // A corner whose tip pokes into a cell no grid corner of which is inside lies outside every cell around it:
     // the loops around it that agree on it (rank 3, within a fifth of a voxel) become one patch, fanned to it.
-    std::vector<int> group(features.size());
-    for (std::size_t i = 0; i < features.size(); ++i) group[i] = int(i);
-    std::function<int(int)> find = [&](int i) { return group[std::size_t(i)] == i ? i : group[std::size_t(i)] = find(group[std::size_t(i)]); };
+    internal::DisjointSets group(features.size());
     {
         std::map<std::int32_t, std::vector<int>> corner_loops_at; // vertex -> rank-3 loops using it
         for (std::size_t i = 0; i < features.size(); ++i)
@@ -371,10 +359,10 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                     for (auto v : mesh.triangles[f]) corner_loops_at[v].push_back(int(i));
         for (const auto& [v, ls] : corner_loops_at)
             for (std::size_t a = 1; a < ls.size(); ++a)
-                if ((features[std::size_t(ls[0])].point - features[std::size_t(ls[a])].point).norm() < 0.2 * h) group[std::size_t(find(ls[a]))] = find(ls[0]);
+                if ((features[std::size_t(ls[0])].point - features[std::size_t(ls[a])].point).norm() < 0.2 * h) group.join(std::size_t(ls[a]), std::size_t(ls[0]));
     }
-    std::map<int, std::vector<int>> patches;
-    for (std::size_t i = 0; i < features.size(); ++i) patches[find(int(i))].push_back(int(i));
+    std::map<std::size_t, std::vector<int>> patches;
+    for (std::size_t i = 0; i < features.size(); ++i) patches[group.find(i)].push_back(int(i));
 
     std::vector<std::uint8_t> removed(nt, 0);
     std::vector<std::array<std::int32_t, 3>> added;

@@ -2,6 +2,7 @@
 #include <voxwarp/resources.h>
 #include <voxwarp/voxelize.h>
 #include <voxwarp/winding_number.h>
+#include <voxwarp_internal/geometry.h>
 #include <voxwarp_internal/vdb_convert.h>
 
 #include <openvdb/tools/MeshToVolume.h>
@@ -14,7 +15,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <numeric>
 #include <string>
 
 namespace voxwarp {
@@ -58,20 +58,16 @@ Bounds solid_bounds(const TriangleMesh& mesh) {
     const auto& faces = all_triangles(mesh, storage);
     // Connected pieces (faces sharing vertices) and their areas; a piece with under 1e-4 of the total area is a
     // stray (a scanner's speck far from the model) and must not stretch the grid.
-    std::vector<std::size_t> parent(mesh.vertices.size());
-    std::iota(parent.begin(), parent.end(), std::size_t(0));
-    auto root = [&](std::size_t v) {
-        while (parent[v] != v) v = parent[v] = parent[parent[v]];
-        return v;
-    };
+    internal::DisjointSets pieces(mesh.vertices.size());
+    auto root = [&](std::size_t v) { return pieces.find(v); };
     std::vector<double> area(faces.size());
     double total = 0;
     for (std::size_t f = 0; f < faces.size(); ++f) {
         const auto& t = faces[f];
         area[f] = 0.5 * (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]).norm();
         total += area[f];
-        parent[root(std::size_t(t[0]))] = root(std::size_t(t[1]));
-        parent[root(std::size_t(t[1]))] = root(std::size_t(t[2]));
+        pieces.join(std::size_t(t[0]), std::size_t(t[1]));
+        pieces.join(std::size_t(t[1]), std::size_t(t[2]));
     }
     if (!(total > 0)) return bounds(mesh);
     std::vector<double> piece_area(mesh.vertices.size(), 0.0);

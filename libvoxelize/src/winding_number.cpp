@@ -1,4 +1,5 @@
 #include <voxwarp/winding_number.h>
+#include <voxwarp_internal/geometry.h>
 
 #include <algorithm>
 #include <cmath>
@@ -173,19 +174,8 @@ WindingNumber::Crossings WindingNumber::crossings(const Eigen::Vector3d& p, cons
         if (enter > leave) continue;
         if (node.left < 0 || top + 2 > 128) {
             for (std::int32_t i = node.first; i < node.first + node.count; ++i) {
-                // Moller-Trumbore: p + u d = a + v (b - a) + w (c - a).
-                const Eigen::Vector3d e1 = tree.b[i] - tree.a[i], e2 = tree.c[i] - tree.a[i];
-                const Eigen::Vector3d pv = d.cross(e2);
-                const double det = e1.dot(pv);
-                if (std::abs(det) < 1e-300) continue; // parallel to the triangle's plane, or a degenerate triangle
-                const Eigen::Vector3d tv = p - tree.a[i];
-                const double v = tv.dot(pv) / det;
-                if (v < 0 || v > 1) continue;
-                const Eigen::Vector3d qv = tv.cross(e1);
-                const double w = d.dot(qv) / det;
-                if (w < 0 || v + w > 1) continue;
-                const double u = e2.dot(qv) / det;
-                if (u < 0 || u > 1) continue;
+                const double u = internal::line_meets_triangle(p, d, tree.a[i], tree.b[i], tree.c[i]); // p + u d
+                if (!(u >= 0 && u <= 1)) continue;
                 ++result.count;
                 result.first = std::min(result.first, u);
                 result.last = std::max(result.last, u);

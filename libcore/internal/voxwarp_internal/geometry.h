@@ -1,0 +1,48 @@
+// Internal to voxwarp's libraries: small geometric and combinatorial pieces several of them need (no OpenVDB).
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <numeric>
+#include <vector>
+
+namespace voxwarp::internal {
+
+/// Where the line o + t d meets triangle (a, b, c) (Moller & Trumbore): its parameter t, of either sign, or NaN
+/// when it passes beside the triangle (barycentric coordinates outside [-slack, 1 + slack]) or runs parallel to
+/// its plane, or the triangle is degenerate.
+inline double line_meets_triangle(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                  const Eigen::Vector3d& c, double slack = 0) {
+    const double miss = std::numeric_limits<double>::quiet_NaN();
+    const Eigen::Vector3d e1 = b - a, e2 = c - a, p = d.cross(e2);
+    const double det = e1.dot(p);
+    if (std::abs(det) < 1e-300) return miss;
+    const Eigen::Vector3d s = o - a;
+    const double u = s.dot(p) / det;
+    if (u < -slack || u > 1 + slack) return miss;
+    const Eigen::Vector3d q = s.cross(e1);
+    const double v = d.dot(q) / det;
+    if (v < -slack || u + v > 1 + slack) return miss;
+    return e2.dot(q) / det;
+}
+
+/// Disjoint sets over 0 .. n-1 (union-find with path halving). join(a, b) puts a's root under b's, so the roots,
+/// and any order derived from them, follow from the order of the joins alone.
+class DisjointSets {
+public:
+    explicit DisjointSets(std::size_t n) : parent_(n) { std::iota(parent_.begin(), parent_.end(), std::size_t(0)); }
+    std::size_t find(std::size_t x) {
+        while (parent_[x] != x) x = parent_[x] = parent_[parent_[x]];
+        return x;
+    }
+    void join(std::size_t a, std::size_t b) { parent_[find(a)] = find(b); }
+
+private:
+    std::vector<std::size_t> parent_;
+};
+
+} // namespace voxwarp::internal
