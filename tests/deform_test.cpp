@@ -258,6 +258,7 @@ TEST(Deform, CubeTurnedByTheWarpStaysSharp) {
     std::printf("cube turned 30 degrees by the warp: vertices within %.3f voxels of the turned cube, its edges mean %.3f max %.3f voxels from the output\n",
                 vertex_max, edge_mean, edge_max);
     EXPECT_LE(vertex_max, 0.3);
+    EXPECT_LE(edge_max, 0.3);
     EXPECT_LE(edge_mean, 0.1);
     EXPECT_TRUE(topology(out).watertight());
 }

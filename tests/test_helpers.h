@@ -72,6 +72,47 @@ inline double torus_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& ce
 }
 
 /// Axis-aligned box [lo, hi], each face an n x n grid of quads split into triangles, outward oriented.
+/// A prism: the counter-clockwise polygon `outline` (in x, y; every vertex seen from its first, so a fan from it
+/// covers it) extruded from z = 0 to `height`, faces wound outwards.
+inline TriangleMesh prism_mesh(const std::vector<Eigen::Vector2d>& outline, double height) {
+    TriangleMesh m;
+    const int n = int(outline.size());
+    for (double z : {0.0, height})
+        for (const auto& p : outline) m.vertices.emplace_back(p.x(), p.y(), z);
+    for (int i = 1; i + 1 < n; ++i) {
+        m.triangles.push_back({0, i + 1, i});          // bottom, seen from below
+        m.triangles.push_back({n, n + i, n + i + 1});  // top
+    }
+    for (int i = 0; i < n; ++i) {
+        const int j = (i + 1) % n;
+        m.triangles.push_back({i, j, n + j});
+        m.triangles.push_back({i, n + j, n + i});
+    }
+    return m;
+}
+
+/// A regular polygon's outline (radius 1, `sides` corners), counter-clockwise.
+inline std::vector<Eigen::Vector2d> regular_polygon(int sides) {
+    std::vector<Eigen::Vector2d> out;
+    for (int i = 0; i < sides; ++i) out.emplace_back(std::cos(2 * M_PI * i / sides), std::sin(2 * M_PI * i / sides));
+    return out;
+}
+
+/// A regular tetrahedron (edge 2 sqrt 2) and a regular octahedron (corners at distance 1 on the axes), faces
+/// wound outwards.
+inline TriangleMesh tetrahedron_mesh() {
+    TriangleMesh m;
+    m.vertices = {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}};
+    m.triangles = {{0, 1, 2}, {0, 3, 1}, {0, 2, 3}, {1, 3, 2}};
+    return m;
+}
+inline TriangleMesh octahedron_mesh() {
+    TriangleMesh m;
+    m.vertices = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+    m.triangles = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+    return m;
+}
+
 inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n) {
     TriangleMesh m;
     std::map<std::array<int, 3>, int> ids;

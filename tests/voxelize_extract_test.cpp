@@ -295,11 +295,6 @@ std::int64_t side_components(const Voxmap& v, bool inside, bool face_diagonals) 
     return count;
 }
 
-// Random densities put ambiguous faces and cubes everywhere, inside voxels on the border, and values exactly at
-// the isovalue. The mesh must be watertight and enclose a positive volume (faces wound outwards); its pieces
-// must be the boundaries between the inside's 6-connected components and the outside's 18-connected ones (an
-// ambiguous face joins its outside corners), one piece per inside and per enclosed outside component; and each
-// vertex must lie on a grid edge at the linear zero of its two voxels.
 /// A unit cube turned by `R`: distance of a point to its surface, and points along its twelve edges.
 struct TurnedCube {
     Eigen::Matrix3d R;
@@ -339,13 +334,41 @@ Sharpness sharpness(const TurnedCube& cube, const TriangleMesh& out, double h) {
     return s;
 }
 
+/// "27.0/38.0": turns about the axes, in degrees, for messages.
+std::string degrees(std::initializer_list<double> angles) {
+    std::string out;
+    for (double a : angles) {
+        char text[32];
+        std::snprintf(text, sizeof text, "%s%.1f", out.empty() ? "" : "/", a);
+        out += text;
+    }
+    return out;
+}
+
 TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
-    // Cubes turned off every axis, voxelized and meshed back with the feature mesher and the input's sharp parts
-    // as Hermite data, against the analytic cube; marching cubes beside it for scale.
+    // Cubes turned off every axis (five chosen turns, then twenty at random about three axes, at 16 to 48
+    // voxels), voxelized and meshed back with the feature mesher and the input's sharp parts as Hermite data,
+    // against the analytic cube; marching cubes beside it for scale.
+    std::vector<std::tuple<Eigen::Matrix3d, int, std::string>> cases;
     for (const auto& [a, b, resolution] : {std::tuple{27.0, 38.0, 32}, std::tuple{10.0, 20.0, 32}, std::tuple{33.0, 61.0, 40}, std::tuple{17.0, 71.0, 24},
-                                            std::tuple{52.0, 13.0, 40}}) {
-        SCOPED_TRACE(std::to_string(a) + ", " + std::to_string(b) + " degrees at " + std::to_string(resolution));
-        const TurnedCube cube{(Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX())).toRotationMatrix()};
+                                            std::tuple{52.0, 13.0, 40}})
+        cases.emplace_back((Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX())).toRotationMatrix(),
+                           resolution, degrees({a, b}));
+    std::mt19937 rng(1);
+    std::uniform_real_distribution<double> angle(0, 90);
+    std::uniform_int_distribution<int> resolutions(16, 48);
+    for (int trial = 0; trial < 20; ++trial) {
+        const double a = angle(rng), b = angle(rng), c = angle(rng);
+        const int resolution = resolutions(rng);
+        cases.emplace_back((Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX()) *
+                            Eigen::AngleAxisd(c * M_PI / 180, Eigen::Vector3d::UnitY()))
+                               .toRotationMatrix(),
+                           resolution, degrees({a, b, c}));
+    }
+    double worst_vertex = 0, worst_edge = 0;
+    for (const auto& [R, resolution, turn] : cases) {
+        SCOPED_TRACE(turn + " degrees at " + std::to_string(resolution));
+        const TurnedCube cube{R};
         const TriangleMesh input = cube.mesh();
         const SparseVoxmap v = voxelize_sparse(input, {.resolution = resolution});
         const double h = v.voxel_size();
@@ -353,19 +376,83 @@ TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
         const TriangleMesh sharp = extract(v, {.mesher = Mesher::features, .feature_surface = &features});
         const TriangleMesh mc = extract(v, {.mesher = Mesher::marching_cubes});
         const Sharpness s = sharpness(cube, sharp, h), m = sharpness(cube, mc, h);
-        std::printf("cube %g/%g at %d: features: vertices within %.3f, edges mean %.3f max %.3f (%.1f %% within 0.15); marching cubes: %.3f, %.3f, %.3f (%.1f %%) voxels\n",
-                    a, b, resolution, s.vertex_max, s.edge_mean, s.edge_max, 100 * s.edge_within, m.vertex_max, m.edge_mean, m.edge_max, 100 * m.edge_within);
+        std::printf("cube %s at %d: features: vertices within %.3f, edges mean %.4f max %.3f; marching cubes: %.3f, %.3f, %.3f voxels\n", turn.c_str(), resolution,
+                    s.vertex_max, s.edge_mean, s.edge_max, m.vertex_max, m.edge_mean, m.edge_max);
         EXPECT_LE(s.vertex_max, 0.1);
-        EXPECT_LE(s.edge_mean, 0.01);
-        EXPECT_GE(s.edge_within, 0.99);
-        EXPECT_LE(s.edge_max, 0.25); // the issue asks 0.15: missed next to two corners (0.152 and 0.180 measured)
-        for (const auto& corner : {Eigen::Vector3d(-0.5, -0.5, -0.5), Eigen::Vector3d(0.5, 0.5, 0.5), Eigen::Vector3d(-0.5, 0.5, 0.5)})
-            EXPECT_LE(distances_to_surface({cube.R * corner}, sharp)[0] / h, 0.15);
+        EXPECT_LE(s.edge_max, 0.15);
+        for (int corner = 0; corner < 8; ++corner)
+            EXPECT_LE(distances_to_surface({R * Eigen::Vector3d(corner & 1 ? 0.5 : -0.5, corner & 2 ? 0.5 : -0.5, corner & 4 ? 0.5 : -0.5)}, sharp)[0] / h, 0.15);
         expect_closed_manifold(sharp);
-        EXPECT_EQ(topology(sharp).euler, 2);
+        // The feature mesher keeps marching cubes' topology. (Voxelizing itself leaves a second closed piece at a
+        // corner of a few turned cubes: both meshers show it.)
+        EXPECT_EQ(topology(sharp).components, topology(mc).components);
+        EXPECT_EQ(topology(sharp).euler, topology(mc).euler);
+        worst_vertex = std::max(worst_vertex, s.vertex_max), worst_edge = std::max(worst_edge, s.edge_max);
     }
+    std::printf("%zu turned cubes: output vertices within %.3f voxel of the cube, its edges within %.3f voxel of the output\n", cases.size(), worst_vertex, worst_edge);
 }
 
+TEST(RoundTrip, PolyhedraKeepTheirEdges) {
+    // Other sharp shapes, each turned four ways at random: obtuse edges (a hexagonal prism), a curved edge (a 24-gon
+    // prism's rims), corners where four faces meet (an octahedron), a concave edge (an L-shaped block), and acute
+    // ones (a triangular prism, a tetrahedron) whose tips are thinner than a voxel within about a voxel of the tip,
+    // where voxelizing loses them. The feature mesher must keep marching cubes' topology, put no vertex further
+    // from the surface than marching cubes does, and bring the input's sharp edges closer to the output.
+    const std::vector<std::pair<std::string, TriangleMesh>> shapes{
+        {"hexagonal prism", test::prism_mesh(test::regular_polygon(6), 0.8)},
+        {"24-gon prism", test::prism_mesh(test::regular_polygon(24), 1.0)},
+        {"octahedron", test::octahedron_mesh()},
+        {"L block", test::prism_mesh({{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}, 0.7)},
+        {"triangular prism", test::prism_mesh(test::regular_polygon(3), 1.2)},
+        {"tetrahedron", test::tetrahedron_mesh()},
+    };
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> angle(0, 360);
+    for (const auto& [name, shape] : shapes)
+        for (int trial = 0; trial < 4; ++trial) {
+            const Eigen::Matrix3d R = (Eigen::AngleAxisd(angle(rng) * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(angle(rng) * M_PI / 180, Eigen::Vector3d::UnitX()) *
+                                       Eigen::AngleAxisd(angle(rng) * M_PI / 180, Eigen::Vector3d::UnitY()))
+                                          .toRotationMatrix();
+            SCOPED_TRACE(name + ", turn " + std::to_string(trial));
+            TriangleMesh input = shape;
+            for (auto& p : input.vertices) p = R * p;
+            const SparseVoxmap v = voxelize_sparse(input, {.resolution = 32});
+            const double h = v.voxel_size();
+            const FeatureSurface features = sharp_feature_surface(input, h);
+            ASSERT_FALSE(features.edges.empty());
+            std::vector<Eigen::Vector3d> edge_points;
+            for (const auto& [a, b] : features.edges) edge_points.push_back(a), edge_points.push_back(0.5 * (a + b));
+            struct Figures {
+                double edge_mean = 0, edge_max = 0, vertex_max = 0;
+            };
+            auto figures = [&](const TriangleMesh& out) {
+                Figures f;
+                for (double d : distances_to_surface(edge_points, out)) f.edge_mean += d / h / double(edge_points.size()), f.edge_max = std::max(f.edge_max, d / h);
+                for (double d : distances_to_surface(out.vertices, input)) f.vertex_max = std::max(f.vertex_max, d / h);
+                return f;
+            };
+            const TriangleMesh sharp = extract(v, {.mesher = Mesher::features, .feature_surface = &features});
+            const TriangleMesh mc = extract(v, {.mesher = Mesher::marching_cubes});
+            const Figures s = figures(sharp), m = figures(mc);
+            std::printf("%s, turn %d: features: edges mean %.4f max %.3f, vertices within %.3f; marching cubes: %.4f, %.3f, %.3f voxels\n", name.c_str(), trial,
+                        s.edge_mean, s.edge_max, s.vertex_max, m.edge_mean, m.edge_max, m.vertex_max);
+            expect_closed_manifold(sharp);
+            EXPECT_EQ(topology(sharp).components, topology(mc).components);
+            EXPECT_EQ(topology(sharp).euler, topology(mc).euler);
+            EXPECT_LE(s.vertex_max, std::max(0.1, m.vertex_max));
+            EXPECT_LE(s.edge_max, m.edge_max);
+            EXPECT_LE(s.edge_mean, 0.25 * m.edge_mean);
+            if (name == "hexagonal prism" || name == "24-gon prism") {
+                EXPECT_LE(s.edge_max, 0.15);
+            }
+        }
+}
+
+// Random densities put ambiguous faces and cubes everywhere, inside voxels on the border, and values exactly at
+// the isovalue. The mesh must be watertight and enclose a positive volume (faces wound outwards); its pieces
+// must be the boundaries between the inside's 6-connected components and the outside's 18-connected ones (an
+// ambiguous face joins its outside corners), one piece per inside and per enclosed outside component; and each
+// vertex must lie on a grid edge at the linear zero of its two voxels.
 TEST(Extract, RandomFieldsGiveWatertightSurfacesOnGridEdges) {
     std::mt19937 rng(11);
     for (int trial = 0; trial < 12; ++trial) {

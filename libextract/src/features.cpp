@@ -1,7 +1,8 @@
 // Sharp features on marching cubes' output (Extended Marching Cubes, Kobbelt, Botsch, Schwanecke & Seidel 2001):
 // normals at the crossings, a vertex where a cell's tangent planes meet, fans around it, and flips that join
-// neighbouring feature vertices along the edge. See extract.h for what it promises; marching_cubes.cpp for the
-// mesh it starts from (every vertex on a grid edge, every triangle inside one cell).
+// neighbouring feature vertices along the edge; then the edges still cut across a sharp edge are split on it
+// (feature_edges.cpp). See extract.h for what it promises; marching_cubes.cpp for the mesh it starts from (every
+// vertex on a grid edge, every triangle inside one cell).
 #include "features.h"
 
 #include <voxwarp_internal/geometry.h>
@@ -22,13 +23,6 @@
 namespace voxwarp::extract_internal {
 
 namespace {
-
-using Index3 = std::array<std::int64_t, 3>;
-
-std::uint64_t cell_key(const Index3& c) {
-    // 21 bits per axis, offset so that the border's cells (index -1) fit.
-    return std::uint64_t(c[0] + 2) | std::uint64_t(c[1] + 2) << 21 | std::uint64_t(c[2] + 2) << 42;
-}
 
 /// A feature surface's triangles hashed by the voxels their bounding boxes touch.
 class TriangleGrid {
@@ -174,6 +168,42 @@ Eigen::Vector3d qef_point(const std::vector<Eigen::Vector3d>& points, const std:
     return centre + svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose() * b;
 }
 
+/// The stretches of the input's sharp edges inside one cell, and the point that stands for them. Where edges meet
+/// at a corner in the cell, a plain mean of the stretches' middles lies off every edge, between them (turned cubes
+/// lost up to 0.18 voxel of edge to such points).
+class EdgeStretches {
+public:
+    void add(const Eigen::Vector3d& middle, const Eigen::Vector3d& direction, double length) {
+        if (length > 0) stretches_.push_back({middle, direction.normalized(), length});
+    }
+    bool empty() const { return stretches_.empty(); }
+    /// The point nearest all the stretches' lines (a corner in the cell), nearest their length-weighted middle
+    /// along the directions the lines leave free (for one straight edge, that middle).
+    Eigen::Vector3d point() const {
+        Eigen::Matrix3d lines = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d moment = Eigen::Vector3d::Zero(), centre = Eigen::Vector3d::Zero();
+        double length = 0;
+        for (const auto& s : stretches_) {
+            const Eigen::Matrix3d across = Eigen::Matrix3d::Identity() - s.direction * s.direction.transpose();
+            lines += s.length * across, moment += s.length * across * s.middle, centre += s.length * s.middle, length += s.length;
+        }
+        centre /= length;
+        const Eigen::JacobiSVD<Eigen::Matrix3d> svd(lines, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        const Eigen::Vector3d sigma = svd.singularValues();
+        Eigen::Vector3d inverse = Eigen::Vector3d::Zero();
+        for (int i = 0; i < 3; ++i)
+            if (sigma[i] > 0.1 * sigma[0]) inverse[i] = 1.0 / sigma[i];
+        return centre + svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose() * (moment - lines * centre);
+    }
+
+private:
+    struct Stretch {
+        Eigen::Vector3d middle, direction;
+        double length;
+    };
+    std::vector<Stretch> stretches_;
+};
+
 } // namespace
 
 TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options) {
@@ -236,8 +266,8 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         if (sharp[f]) candidate_cells.insert(cell_key(cell_of(mesh.triangles[f])));
     // The input's sharp edges, where given: every cell they pass through holds a feature, even one where marching
     // cubes sees only one of the two faces (an edge that clips a cell's corner between its grid edges); there the
-    // feature point is the middle of the edge's stretch inside the cell.
-    std::unordered_map<std::uint64_t, std::pair<Eigen::Vector3d, double>> edge_in_cell; // length-weighted sum of points, length
+    // feature point is the middle of the edge's stretch inside the cell, or the corner where edges meet in it.
+    std::unordered_map<std::uint64_t, EdgeStretches> edge_in_cell;
     if (options.feature_surface)
         for (const auto& [a, b] : options.feature_surface->edges) {
             // Every cell the segment passes through (Amanatides & Woo's traversal), with the middle of its stretch
@@ -257,41 +287,13 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                 }
                 exit = std::max(exit, t);
                 const double length = (exit - t) * d.norm();
-                auto& [sum, weight] = edge_in_cell.try_emplace(cell_key(c), Eigen::Vector3d::Zero(), 0.0).first->second;
-                sum += length * (a + (b - a) * (0.5 * (t + exit))), weight += length;
+                edge_in_cell[cell_key(c)].add(a + (b - a) * (0.5 * (t + exit)), b - a, length);
                 candidate_cells.insert(cell_key(c));
                 if (axis < 0 || c == last || exit >= 1) break;
                 c[std::size_t(axis)] += d[axis] > 0 ? 1 : -1;
                 t = exit;
             }
         }
-    // A sharp edge may clip a cell so thinly that none of its grid corners is inside: marching cubes meshes nothing
-    // there, and chamfers the edge in a neighbouring cell instead. That neighbour (the meshed cell nearest the
-    // edge's stretch, not on the edge itself) takes the edge's point.
-    std::unordered_map<std::uint64_t, Eigen::Vector3d> borrowed;
-    if (!edge_in_cell.empty()) {
-        std::unordered_set<std::uint64_t> meshed;
-        for (std::size_t f = 0; f < nt; ++f) meshed.insert(cell_key(cell_of(mesh.triangles[f])));
-        std::vector<std::pair<std::uint64_t, Eigen::Vector3d>> empty;
-        for (const auto& [key, acc] : edge_in_cell)
-            if (!meshed.count(key) && acc.second > 0) empty.emplace_back(key, acc.first / acc.second);
-        std::sort(empty.begin(), empty.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-        for (const auto& [key, point] : empty) {
-            const Index3 c{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
-            double best = std::numeric_limits<double>::infinity();
-            std::uint64_t chosen = 0;
-            for (int dz = -1; dz <= 1; ++dz)
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const Index3 n{c[0] + dx, c[1] + dy, c[2] + dz};
-                        const std::uint64_t nk = cell_key(n);
-                        if (!meshed.count(nk) || edge_in_cell.count(nk) || borrowed.count(nk)) continue;
-                        const double d = (voxmap.index_of(point) - Eigen::Vector3d(double(n[0]) + 0.5, double(n[1]) + 0.5, double(n[2]) + 0.5)).norm();
-                        if (d < best) best = d, chosen = nk;
-                    }
-            if (std::isfinite(best)) borrowed.emplace(chosen, point), candidate_cells.insert(chosen);
-        }
-    }
     std::map<std::uint64_t, std::vector<std::uint32_t>> cell_triangles; // ordered: the output does not depend on hashing
     for (std::size_t f = 0; f < nt; ++f) {
         const std::uint64_t key = cell_key(cell_of(mesh.triangles[f]));
@@ -304,7 +306,6 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         Index3 cell;
         Eigen::Vector3d point;
         int rank = 0;
-        bool outside = false; // its point is a neighbour's (borrowed above)
     };
     std::vector<Loop> features;
     for (const auto& [key, faces] : cell_triangles) {
@@ -334,17 +335,15 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             for (std::size_t i = 0; i < ns.size(); ++i)
                 for (std::size_t j = i + 1; j < ns.size(); ++j) worst = std::min(worst, ns[i].dot(ns[j]));
             const auto along = edge_in_cell.find(key);
-            const auto lent = borrowed.find(key);
-            if (worst >= cos_feature && along == edge_in_cell.end() && lent == borrowed.end()) continue;
+            if (worst >= cos_feature && along == edge_in_cell.end()) continue;
             Eigen::Vector3d centre = Eigen::Vector3d::Zero();
             for (const auto& p : points) centre += p;
             centre /= double(points.size());
-            Loop l{std::move(loop), cell, Eigen::Vector3d::Zero(), 0, false};
+            Loop l{std::move(loop), cell, Eigen::Vector3d::Zero(), 0};
             l.point = qef_point(points, ns, centre, l.rank);
             // On a known sharp edge, the edge's own point, unless the planes find a corner in the cell.
-            if (along != edge_in_cell.end() && along->second.second > 0 && !(l.rank == 3 && worst < cos_feature))
-                l.point = along->second.first / along->second.second, l.rank = 2;
-            if (lent != borrowed.end()) l.point = lent->second, l.rank = 2, l.outside = true;
+            if (along != edge_in_cell.end() && !along->second.empty() && !(l.rank == 3 && worst < cos_feature))
+                l.point = along->second.point(), l.rank = 2;
             if (l.rank >= 2) features.push_back(std::move(l));
         }
     }
@@ -401,7 +400,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         // (these fans took turned cubes' edges from 0.46 voxel off at worst to 0.18). Normals from the density's
         // gradient are not trusted that far.
         const Loop& first = features[std::size_t(members[0])];
-        const double slack = first.rank == 3 || first.outside ? 1.0 : grid ? 0.8 : 0.05;
+        const double slack = first.rank == 3 ? 1.0 : grid ? 0.8 : 0.05;
         const Eigen::Vector3d q = voxmap.index_of(point);
         if (((q - lo).array() < -slack).any() || ((q - hi).array() > slack).any()) continue;
         const auto centre_index = std::int32_t(mesh.vertices.size());
@@ -409,7 +408,6 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         for (auto f : tris) removed[f] = 1;
         for (std::size_t i = 0; i < cycle.size(); ++i) added.push_back({centre_index, cycle[i], cycle[(i + 1) % cycle.size()]});
     }
-    if (added.empty()) return mesh;
     std::vector<std::array<std::int32_t, 3>> triangles;
     triangles.reserve(nt + added.size());
     for (std::size_t f = 0; f < nt; ++f)
@@ -449,6 +447,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         A = A2, B = B2;
     }
     mesh.triangles = std::move(triangles);
+    if (options.feature_surface) split_across_sharp_edges(mesh.vertices, mesh.triangles, normals, cos_feature, options.feature_surface->edges, voxmap);
     return mesh;
 }
 

@@ -5,7 +5,8 @@
 /// Extended Marching Cubes, 2001): in a cell whose crossings' normals disagree by more than `feature_angle`, the
 /// cell's polygon becomes a fan around the point its tangent planes meet at (an edge or a corner), and edges
 /// between such points in neighbouring cells are flipped to join them, so edges and corners come out straight
-/// and sharp. Near `feature_surface` (the input's surface around its sharp edges, e.g. sharp_feature_surface of the
+/// and sharp; with `feature_surface`, mesh edges still cut across one of its sharp edges are split on it. Near
+/// `feature_surface` (the input's surface around its sharp edges, e.g. sharp_feature_surface of the
 /// mesh voxelized, carried through a warp) the crossings and their normals are where each grid edge meets it;
 /// elsewhere the normals come from the density's gradient. Away from sharp parts the output is marching cubes'.
 ///
