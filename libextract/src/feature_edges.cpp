@@ -14,10 +14,12 @@
 // that would turn a triangle over is not made.
 #include "features.h"
 
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <cmath>
 #include <unordered_map>
-#include <unordered_set>
 
 namespace voxwarp::extract_internal {
 
@@ -42,14 +44,13 @@ void closest_between_segments(const Eigen::Vector3d& p0, const Eigen::Vector3d& 
     else if (t > 1) t = 1, s = std::clamp((b - c) / a, 0.0, 1.0);
 }
 
-/// The input's sharp edges hashed by the voxels their bounding boxes, grown by `grow` (world units), touch.
+/// The input's sharp edges hashed by the voxels their bounding boxes touch.
 class EdgeGrid {
 public:
-    EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v, double grow) : edges_(edges), voxmap_(v) {
-        const Eigen::Vector3d by = Eigen::Vector3d::Constant(grow / v.voxel_size());
+    EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v) : edges_(edges), voxmap_(v) {
         for (std::size_t i = 0; i < edges.size(); ++i) {
             const Eigen::Vector3d qa = v.index_of(edges[i].first), qb = v.index_of(edges[i].second);
-            const Index3 lo = cell_of_index(qa.cwiseMin(qb) - by), hi = cell_of_index(qa.cwiseMax(qb) + by);
+            const Index3 lo = cell_of_index(qa.cwiseMin(qb)), hi = cell_of_index(qa.cwiseMax(qb));
             if (hi[0] - lo[0] > 8 || hi[1] - lo[1] > 8 || hi[2] - lo[2] > 8) continue; // not cut for this voxmap
             for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
                 for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
@@ -60,19 +61,27 @@ public:
     /// ends and at least `margin` from either (a sharp edge through an end, a feature vertex on another sharp
     /// edge, is no reason to split); with the edge's direction there. False when there is none.
     bool nearest(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double reach, double margin, Eigen::Vector3d& point, Eigen::Vector3d& direction) const {
-        const auto it = cells_.find(cell_key(cell_of_index(voxmap_.index_of(0.5 * (a + b)))));
-        if (it == cells_.end()) return false;
+        const Eigen::Vector3d grow = Eigen::Vector3d::Constant(reach / voxmap_.voxel_size());
+        const Eigen::Vector3d qa = voxmap_.index_of(a), qb = voxmap_.index_of(b);
+        const Index3 lo = cell_of_index(qa.cwiseMin(qb) - grow), hi = cell_of_index(qa.cwiseMax(qb) + grow);
         double best = reach;
+        std::uint32_t chosen = 0;
         bool found = false;
-        for (std::uint32_t i : it->second) {
-            const auto& [q0, q1] = edges_[i];
-            double s = 0, t = 0;
-            closest_between_segments(a, b, q0, q1, s, t);
-            const Eigen::Vector3d on_edge = q0 + t * (q1 - q0);
-            const double d = (a + s * (b - a) - on_edge).norm();
-            if (s < 0.02 || s > 0.98 || (on_edge - a).norm() < margin || (on_edge - b).norm() < margin) continue;
-            if (d < best) best = d, point = on_edge, direction = q1 - q0, found = true;
-        }
+        for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
+                    const auto it = cells_.find(cell_key({x, y, z}));
+                    if (it == cells_.end()) continue;
+                    for (std::uint32_t i : it->second) {
+                        const auto& [q0, q1] = edges_[i];
+                        double s = 0, t = 0;
+                        closest_between_segments(a, b, q0, q1, s, t);
+                        const Eigen::Vector3d on_edge = q0 + t * (q1 - q0);
+                        const double d = (a + s * (b - a) - on_edge).norm();
+                        if (s < 0.02 || s > 0.98 || (on_edge - a).norm() < margin || (on_edge - b).norm() < margin) continue;
+                        if (d < best || (d == best && found && i < chosen)) best = d, chosen = i, point = on_edge, direction = q1 - q0, found = true;
+                    }
+                }
         return found;
     }
 
@@ -95,31 +104,34 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     if (edges.empty()) return;
     const double h = voxmap.voxel_size();
     const double reach = 0.6 * h; // deeper than marching cubes' chamfer of a right-angled edge
-    const EdgeGrid grid(edges, voxmap, reach + 2 * h);
+    const EdgeGrid grid(edges, voxmap);
 
-    // Each undirected mesh edge once; not one whose ends' normals agree (both on one face).
+    // Each undirected mesh edge once (closed and consistently wound, it runs a -> b with a < b in one of its two
+    // triangles); not one whose ends' normals agree (both on one face).
     struct Split {
         std::int32_t a, b;
         Eigen::Vector3d point, along; // the sharp edge's point and direction
     };
-    std::vector<Split> splits;
-    std::unordered_set<std::uint64_t> seen;
     auto known = [&](std::int32_t v) { return std::size_t(v) < normals.size() && !normals[std::size_t(v)].isZero(); };
-    for (const auto& t : triangles)
-        for (int c = 0; c < 3; ++c) {
-            const std::int32_t a = std::min(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]), b = std::max(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]);
-            if (known(a) && known(b) && normals[std::size_t(a)].dot(normals[std::size_t(b)]) >= cos_feature) continue;
-            if (!seen.insert(directed(a, b)).second) continue;
-            const Eigen::Vector3d &pa = vertices[std::size_t(a)], &pb = vertices[std::size_t(b)];
-            Eigen::Vector3d point = Eigen::Vector3d::Zero(), along = Eigen::Vector3d::Zero();
-            if (grid.nearest(pa, pb, reach, 0.02 * h, point, along)) splits.push_back({a, b, point, along});
-        }
+    tbb::enumerable_thread_specific<std::vector<Split>> found;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const auto& range) {
+        auto& local = found.local();
+        for (std::size_t i = range.begin(); i != range.end(); ++i)
+            for (int c = 0; c < 3; ++c) {
+                const std::int32_t a = triangles[i][std::size_t(c)], b = triangles[i][std::size_t((c + 1) % 3)];
+                if (a > b || (known(a) && known(b) && normals[std::size_t(a)].dot(normals[std::size_t(b)]) >= cos_feature)) continue;
+                Eigen::Vector3d point = Eigen::Vector3d::Zero(), along = Eigen::Vector3d::Zero();
+                if (grid.nearest(vertices[std::size_t(a)], vertices[std::size_t(b)], reach, 0.02 * h, point, along)) local.push_back({a, b, point, along});
+            }
+    });
+    std::vector<Split> splits;
+    for (const auto& local : found) splits.insert(splits.end(), local.begin(), local.end());
     if (splits.empty()) return;
     std::sort(splits.begin(), splits.end(), [](const Split& x, const Split& y) { return std::pair(x.a, x.b) < std::pair(y.a, y.b); });
 
     // Directed edges of the triangles around the edges to split.
-    std::unordered_set<std::int32_t> touched;
-    for (const auto& s : splits) touched.insert(s.a), touched.insert(s.b);
+    std::vector<std::uint8_t> touched(vertices.size(), 0);
+    for (const auto& s : splits) touched[std::size_t(s.a)] = touched[std::size_t(s.b)] = 1;
     std::unordered_map<std::uint64_t, std::uint32_t> holder;
     auto enter = [&](std::uint32_t i) {
         const Triangle& t = triangles[i];
@@ -127,7 +139,7 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     };
     for (std::size_t i = 0; i < triangles.size(); ++i) {
         const Triangle& t = triangles[i];
-        if (touched.count(t[0]) || touched.count(t[1]) || touched.count(t[2])) enter(std::uint32_t(i));
+        if (touched[std::size_t(t[0])] | touched[std::size_t(t[1])] | touched[std::size_t(t[2])]) enter(std::uint32_t(i));
     }
     auto third = [](const Triangle& t, std::int32_t a, std::int32_t b) {
         for (auto v : t)
