@@ -6,6 +6,7 @@
 #include <voxwarp_internal/vdb_convert.h>
 
 #include <openvdb/tools/MeshToVolume.h>
+#include <openvdb/tree/LeafManager.h>
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -513,11 +514,46 @@ struct Ramp {
 };
 
 /// The flood-fill path's signed distance: OpenVDB's narrow-band level set of a watertight mesh.
+/// Move just outside each inside voxel that touches the rest of the inside only along an edge or at a corner: the
+/// tip of a solid's corner turned off the grid's axes, thinner than a voxel, can hold one voxel centre whose
+/// face neighbours are all outside. Extract joins inside voxels across faces only, so it would come out as a
+/// speck of its own (an 8-triangle piece beside a turned cube, on 2 % of random turns). A voxel with no inside
+/// neighbour at all is a part of its own, and stays. Returns the voxels moved.
+std::int64_t drop_corner_tips(openvdb::FloatGrid& level_set) {
+    openvdb::tree::LeafManager<openvdb::FloatTree> leaves(level_set.tree());
+    // Only a voxel less than a voxel inside can have every face neighbour outside.
+    const float depth = -float(level_set.voxelSize()[0]);
+    tbb::enumerable_thread_specific<std::vector<openvdb::Coord>> found;
+    tbb::parallel_for(leaves.leafRange(), [&](const auto& range) {
+        auto accessor = level_set.getConstAccessor();
+        auto& list = found.local();
+        for (auto leaf = range.begin(); leaf; ++leaf)
+            for (auto v = leaf->cbeginValueOn(); v; ++v) {
+                if (*v > 0 || *v < depth) continue;
+                const openvdb::Coord c = v.getCoord();
+                auto inside = [&](int dx, int dy, int dz) { return accessor.getValue(c.offsetBy(dx, dy, dz)) <= 0; };
+                if (inside(-1, 0, 0) || inside(1, 0, 0) || inside(0, -1, 0) || inside(0, 1, 0) || inside(0, 0, -1) || inside(0, 0, 1)) continue;
+                bool touches = false;
+                for (int dz = -1; dz <= 1 && !touches; ++dz)
+                    for (int dy = -1; dy <= 1 && !touches; ++dy)
+                        for (int dx = -1; dx <= 1 && !touches; ++dx) touches = std::abs(dx) + std::abs(dy) + std::abs(dz) > 1 && inside(dx, dy, dz);
+                if (touches) list.push_back(c);
+            }
+    });
+    std::int64_t moved = 0;
+    const float just_outside = float(1e-4 * level_set.voxelSize()[0]);
+    auto accessor = level_set.getAccessor();
+    for (const auto& list : found)
+        for (const auto& c : list) accessor.setValue(c, just_outside), ++moved;
+    return moved;
+}
+
 openvdb::FloatGrid::Ptr flood_fill_level_set(const TriangleMesh& mesh, const openvdb::math::Transform& xform, float half_width, Progress& progress) {
     vdb_internal::ProgressInterrupter interrupter{&progress};
     auto level_set = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupter, xform, vdb_points(mesh), vdb_triangles(mesh),
                                                                          std::vector<openvdb::Vec4I>{}, half_width);
     progress.check();
+    drop_corner_tips(*level_set);
     return level_set;
 }
 
