@@ -71,7 +71,6 @@ inline double torus_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& ce
     return std::hypot(std::hypot(q.x(), q.y()) - R, q.z()) - r;
 }
 
-/// Axis-aligned box [lo, hi], each face an n x n grid of quads split into triangles, outward oriented.
 /// A prism: the counter-clockwise polygon `outline` (in x, y; every vertex seen from its first, so a fan from it
 /// covers it) extruded from z = 0 to `height`, faces wound outwards.
 inline TriangleMesh prism_mesh(const std::vector<Eigen::Vector2d>& outline, double height) {
@@ -113,6 +112,7 @@ inline TriangleMesh octahedron_mesh() {
     return m;
 }
 
+/// Axis-aligned box [lo, hi], each face an n x n grid of quads split into triangles, outward oriented.
 inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n) {
     TriangleMesh m;
     std::map<std::array<int, 3>, int> ids;

@@ -513,11 +513,10 @@ struct Ramp {
     }
 };
 
-/// The flood-fill path's signed distance: OpenVDB's narrow-band level set of a watertight mesh.
 /// Move just outside each inside voxel that touches the rest of the inside only along an edge or at a corner: the
 /// tip of a solid's corner turned off the grid's axes, thinner than a voxel, can hold one voxel centre whose
 /// face neighbours are all outside. Extract joins inside voxels across faces only, so it would come out as a
-/// speck of its own (an 8-triangle piece beside a turned cube, on 2 % of random turns). A voxel with no inside
+/// speck of its own (an 8-triangle piece beside a turned cube, on 1-2 % of random turns). A voxel with no inside
 /// neighbour at all is a part of its own, and stays. Returns the voxels moved.
 std::int64_t drop_corner_tips(openvdb::FloatGrid& level_set) {
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(level_set.tree());
@@ -548,6 +547,7 @@ std::int64_t drop_corner_tips(openvdb::FloatGrid& level_set) {
     return moved;
 }
 
+/// The flood-fill path's signed distance: OpenVDB's narrow-band level set of a watertight mesh, corner tips dropped.
 openvdb::FloatGrid::Ptr flood_fill_level_set(const TriangleMesh& mesh, const openvdb::math::Transform& xform, float half_width, Progress& progress) {
     vdb_internal::ProgressInterrupter interrupter{&progress};
     auto level_set = openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(interrupter, xform, vdb_points(mesh), vdb_triangles(mesh),
