@@ -334,6 +334,13 @@ Sharpness sharpness(const TurnedCube& cube, const TriangleMesh& out, double h) {
     return s;
 }
 
+/// A turn by a degrees about z, then b about x, then c about y (applied to a point: y first).
+Eigen::Matrix3d turn(double a, double b, double c) {
+    return (Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX()) *
+            Eigen::AngleAxisd(c * M_PI / 180, Eigen::Vector3d::UnitY()))
+        .toRotationMatrix();
+}
+
 /// "27.0/38.0": turns about the axes, in degrees, for messages.
 std::string degrees(std::initializer_list<double> angles) {
     std::string out;
@@ -353,9 +360,7 @@ TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
     std::vector<std::tuple<Eigen::Matrix3d, int, std::string>> cases;
     for (const auto& [a, b, c, resolution] : {std::tuple{27.0, 38.0, 0.0, 32}, std::tuple{10.0, 20.0, 0.0, 32}, std::tuple{33.0, 61.0, 0.0, 40},
                                                std::tuple{17.0, 71.0, 0.0, 24}, std::tuple{52.0, 13.0, 0.0, 40}, std::tuple{59.7, 56.0, 10.3, 41}})
-        cases.emplace_back((Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX()) *
-                            Eigen::AngleAxisd(c * M_PI / 180, Eigen::Vector3d::UnitY()))
-                               .toRotationMatrix(),
+        cases.emplace_back(turn(a, b, c),
                            resolution, degrees({a, b, c}));
     std::mt19937 rng(1);
     std::uniform_real_distribution<double> angle(0, 90);
@@ -363,14 +368,12 @@ TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
     for (int trial = 0; trial < 20; ++trial) {
         const double a = angle(rng), b = angle(rng), c = angle(rng);
         const int resolution = resolutions(rng);
-        cases.emplace_back((Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX()) *
-                            Eigen::AngleAxisd(c * M_PI / 180, Eigen::Vector3d::UnitY()))
-                               .toRotationMatrix(),
+        cases.emplace_back(turn(a, b, c),
                            resolution, degrees({a, b, c}));
     }
     double worst_vertex = 0, worst_edge = 0;
-    for (const auto& [R, resolution, turn] : cases) {
-        SCOPED_TRACE(turn + " degrees at " + std::to_string(resolution));
+    for (const auto& [R, resolution, label] : cases) {
+        SCOPED_TRACE(label + " degrees at " + std::to_string(resolution));
         const TurnedCube cube{R};
         const TriangleMesh input = cube.mesh();
         const SparseVoxmap v = voxelize_sparse(input, {.resolution = resolution});
@@ -379,7 +382,7 @@ TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
         const TriangleMesh sharp = extract(v, {.mesher = Mesher::features, .feature_surface = &features});
         const TriangleMesh mc = extract(v, {.mesher = Mesher::marching_cubes});
         const Sharpness s = sharpness(cube, sharp, h), m = sharpness(cube, mc, h);
-        std::printf("cube %s at %d: features: vertices within %.3f, edges mean %.4f max %.3f; marching cubes: %.3f, %.3f, %.3f voxels\n", turn.c_str(), resolution,
+        std::printf("cube %s at %d: features: vertices within %.3f, edges mean %.4f max %.3f; marching cubes: %.3f, %.3f, %.3f voxels\n", label.c_str(), resolution,
                     s.vertex_max, s.edge_mean, s.edge_max, m.vertex_max, m.edge_mean, m.edge_max);
         EXPECT_LE(s.vertex_max, 0.1);
         EXPECT_LE(s.edge_max, 0.15);
@@ -413,9 +416,8 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
     std::uniform_real_distribution<double> angle(0, 360);
     for (const auto& [name, shape] : shapes)
         for (int trial = 0; trial < 4; ++trial) {
-            const Eigen::Matrix3d R = (Eigen::AngleAxisd(angle(rng) * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(angle(rng) * M_PI / 180, Eigen::Vector3d::UnitX()) *
-                                       Eigen::AngleAxisd(angle(rng) * M_PI / 180, Eigen::Vector3d::UnitY()))
-                                          .toRotationMatrix();
+            const double a = angle(rng), b = angle(rng), c = angle(rng); // drawn in this order, on any compiler
+            const Eigen::Matrix3d R = turn(a, b, c);
             SCOPED_TRACE(name + ", turn " + std::to_string(trial));
             TriangleMesh input = shape;
             for (auto& p : input.vertices) p = R * p;

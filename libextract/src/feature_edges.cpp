@@ -27,8 +27,6 @@ namespace {
 
 using Triangle = std::array<std::int32_t, 3>;
 
-Index3 cell_of_index(const Eigen::Vector3d& q) { return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))}; }
-
 /// Closest points of segments p0 p1 and q0 q1 (Ericson, Real-Time Collision Detection 5.1.9): parameters s, t.
 void closest_between_segments(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1, const Eigen::Vector3d& q0, const Eigen::Vector3d& q1, double& s, double& t) {
     const Eigen::Vector3d d1 = p1 - p0, d2 = q1 - q0, r = p0 - q0;
@@ -50,11 +48,9 @@ public:
     EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v) : edges_(edges), voxmap_(v) {
         for (std::size_t i = 0; i < edges.size(); ++i) {
             const Eigen::Vector3d qa = v.index_of(edges[i].first), qb = v.index_of(edges[i].second);
-            const Index3 lo = cell_of_index(qa.cwiseMin(qb)), hi = cell_of_index(qa.cwiseMax(qb));
+            const Index3 lo = cell_containing(qa.cwiseMin(qb)), hi = cell_containing(qa.cwiseMax(qb));
             if (hi[0] - lo[0] > 8 || hi[1] - lo[1] > 8 || hi[2] - lo[2] > 8) continue; // not cut for this voxmap
-            for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
-                for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-                    for (std::int64_t x = lo[0]; x <= hi[0]; ++x) cells_[cell_key({x, y, z})].push_back(std::uint32_t(i));
+            cells_.add(qa.cwiseMin(qb), qa.cwiseMax(qb), std::uint32_t(i));
         }
     }
     /// The sharp edges' point nearest the segment a b, where that is within `reach` of it, nearest it between its
@@ -63,16 +59,14 @@ public:
     bool nearest(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double reach, double margin, Eigen::Vector3d& point, Eigen::Vector3d& direction) const {
         const Eigen::Vector3d grow = Eigen::Vector3d::Constant(reach / voxmap_.voxel_size());
         const Eigen::Vector3d qa = voxmap_.index_of(a), qb = voxmap_.index_of(b);
-        const Index3 lo = cell_of_index(qa.cwiseMin(qb) - grow), hi = cell_of_index(qa.cwiseMax(qb) + grow);
+        const Index3 lo = cell_containing(qa.cwiseMin(qb) - grow), hi = cell_containing(qa.cwiseMax(qb) + grow);
         double best = reach;
         std::uint32_t chosen = 0;
         bool found = false;
         for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
             for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-                for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
-                    const auto it = cells_.find(cell_key({x, y, z}));
-                    if (it == cells_.end()) continue;
-                    for (std::uint32_t i : it->second) {
+                for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+                    for (std::uint32_t i : cells_.at(cell_key({x, y, z}))) {
                         const auto& [q0, q1] = edges_[i];
                         double s = 0, t = 0;
                         closest_between_segments(a, b, q0, q1, s, t);
@@ -81,14 +75,13 @@ public:
                         if (s < 0.02 || s > 0.98 || (on_edge - a).norm() < margin || (on_edge - b).norm() < margin) continue;
                         if (d < best || (d == best && found && i < chosen)) best = d, chosen = i, point = on_edge, direction = q1 - q0, found = true;
                     }
-                }
         return found;
     }
 
 private:
     const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges_;
     const SparseVoxmap& voxmap_;
-    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
+    CellBuckets cells_;
 };
 
 std::uint64_t directed(std::int32_t a, std::int32_t b) { return std::uint64_t(std::uint32_t(a)) << 32 | std::uint32_t(b); }

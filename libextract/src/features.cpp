@@ -33,9 +33,7 @@ public:
             const Eigen::Vector3d &a = s.vertices[std::size_t(f[0])], &b = s.vertices[std::size_t(f[1])], &c = s.vertices[std::size_t(f[2])];
             const Eigen::Vector3d lo = v.index_of(a.cwiseMin(b).cwiseMin(c)), hi = v.index_of(a.cwiseMax(b).cwiseMax(c));
             if (((hi - lo).array() > 64).any()) continue; // not a voxel-sized piece: the surface was not cut for this voxmap
-            for (std::int64_t z = std::int64_t(std::floor(lo.z())); z <= std::int64_t(std::floor(hi.z())); ++z)
-                for (std::int64_t y = std::int64_t(std::floor(lo.y())); y <= std::int64_t(std::floor(hi.y())); ++y)
-                    for (std::int64_t x = std::int64_t(std::floor(lo.x())); x <= std::int64_t(std::floor(hi.x())); ++x) cells_[cell_key({x, y, z})].push_back(std::uint32_t(t));
+            cells_.add(lo, hi, std::uint32_t(t));
         }
     }
     /// Where the segment a -> b meets the surface (parameter t in [0, 1] and the face's unit normal), the meeting
@@ -43,10 +41,8 @@ public:
     bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<std::uint64_t, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
         const Eigen::Vector3d d = b - a;
         double best = std::numeric_limits<double>::infinity();
-        for (const std::uint64_t key : voxels) {
-            const auto it = cells_.find(key);
-            if (it == cells_.end()) continue;
-            for (std::uint32_t t : it->second) {
+        for (const std::uint64_t key : voxels)
+            for (std::uint32_t t : cells_.at(key)) {
                 const auto& f = surface_.triangles[t];
                 const Eigen::Vector3d &p = surface_.vertices[std::size_t(f[0])], &q = surface_.vertices[std::size_t(f[1])], &r = surface_.vertices[std::size_t(f[2])];
                 const double t_hit = internal::line_meets_triangle(a, d, p, q, r, 1e-9);
@@ -55,23 +51,19 @@ public:
                 t_out = t_hit;
                 normal = (q - p).cross(r - p).normalized();
             }
-        }
         return std::isfinite(best);
     }
 
     /// The nearest point of the surface's triangles in the 3^3 voxels around `p`'s voxel within `radius`, with its
     /// triangle's unit normal; false when none is that near.
     bool nearest(const Eigen::Vector3d& p, const SparseVoxmap& v, double radius, Eigen::Vector3d& point, Eigen::Vector3d& normal) const {
-        const Eigen::Vector3d q = v.index_of(p);
-        const Index3 c{std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
+        const Index3 c = cell_containing(v.index_of(p));
         double best = radius;
         bool found = false;
         for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const auto it = cells_.find(cell_key({c[0] + dx, c[1] + dy, c[2] + dz}));
-                    if (it == cells_.end()) continue;
-                    for (std::uint32_t t : it->second) {
+                for (int dx = -1; dx <= 1; ++dx)
+                    for (std::uint32_t t : cells_.at(cell_key({c[0] + dx, c[1] + dy, c[2] + dz}))) {
                         const auto& f = surface_.triangles[t];
                         const Eigen::Vector3d x = closest_on_triangle(p, surface_.vertices[std::size_t(f[0])], surface_.vertices[std::size_t(f[1])], surface_.vertices[std::size_t(f[2])]);
                         const double d = (x - p).norm();
@@ -81,7 +73,6 @@ public:
                             normal = n.normalized();
                         }
                     }
-                }
         return found;
     }
 
@@ -107,7 +98,7 @@ private:
         return a + ab * (vb * denom) + ac * (vc * denom);
     }
     const TriangleMesh& surface_;
-    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
+    CellBuckets cells_;
 };
 
 /// A vertex's grid edge: the low voxel and the axis (or axis -1 for a vertex that is not on one, a fan centre).
@@ -150,8 +141,20 @@ Eigen::Vector3d gradient_normal(const SparseVoxmap& v, const GridEdge& e) {
     return n > 0 ? Eigen::Vector3d(-g / n) : Eigen::Vector3d::Zero();
 }
 
-/// The point nearest the mass point `centre` where tangent planes (point, normal) meet, singular values below a
-/// tenth of the largest dropped (an edge leaves one direction free, a plane two).
+/// The least-squares x of A x = b smallest in norm, singular values below a tenth of the largest dropped (a
+/// direction the equations barely hold stays free); `rank` counts those kept.
+Eigen::Vector3d truncated_solve(const Eigen::Matrix3d& A, const Eigen::Vector3d& b, int& rank) {
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Eigen::Vector3d sigma = svd.singularValues();
+    Eigen::Vector3d inverse = Eigen::Vector3d::Zero();
+    rank = 0;
+    for (int i = 0; i < 3; ++i)
+        if (sigma[i] > 0.1 * sigma[0]) inverse[i] = 1.0 / sigma[i], ++rank;
+    return svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose() * b;
+}
+
+/// The point nearest the mass point `centre` where tangent planes (point, normal) meet (an edge leaves one
+/// direction free, a plane two).
 Eigen::Vector3d qef_point(const std::vector<Eigen::Vector3d>& points, const std::vector<Eigen::Vector3d>& normals, const Eigen::Vector3d& centre, int& rank) {
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
     Eigen::Vector3d b = Eigen::Vector3d::Zero();
@@ -159,13 +162,7 @@ Eigen::Vector3d qef_point(const std::vector<Eigen::Vector3d>& points, const std:
         A += normals[i] * normals[i].transpose();
         b += normals[i] * normals[i].dot(points[i] - centre);
     }
-    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(A, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    const Eigen::Vector3d sigma = svd.singularValues();
-    Eigen::Vector3d inverse = Eigen::Vector3d::Zero();
-    rank = 0;
-    for (int i = 0; i < 3; ++i)
-        if (sigma[i] > 0.1 * sigma[0]) inverse[i] = 1.0 / sigma[i], ++rank;
-    return centre + svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose() * b;
+    return centre + truncated_solve(A, b, rank);
 }
 
 /// The stretches of the input's sharp edges inside one cell, and the point that stands for them. Where edges meet
@@ -188,12 +185,8 @@ public:
             lines += s.length * across, moment += s.length * across * s.middle, centre += s.length * s.middle, length += s.length;
         }
         centre /= length;
-        const Eigen::JacobiSVD<Eigen::Matrix3d> svd(lines, Eigen::ComputeFullU | Eigen::ComputeFullV);
-        const Eigen::Vector3d sigma = svd.singularValues();
-        Eigen::Vector3d inverse = Eigen::Vector3d::Zero();
-        for (int i = 0; i < 3; ++i)
-            if (sigma[i] > 0.1 * sigma[0]) inverse[i] = 1.0 / sigma[i];
-        return centre + svd.matrixV() * inverse.asDiagonal() * svd.matrixU().transpose() * (moment - lines * centre);
+        int rank = 0;
+        return centre + truncated_solve(lines, moment - lines * centre, rank);
     }
 
 private:
@@ -249,8 +242,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     // Cells holding a triangle whose corners' normals disagree: the candidates.
     const std::size_t nt = mesh.triangles.size();
     auto cell_of = [&](const std::array<std::int32_t, 3>& t) {
-        const Eigen::Vector3d q = voxmap.index_of((mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3);
-        return Index3{std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
+        return cell_containing(voxmap.index_of((mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3));
     };
     std::vector<std::uint8_t> sharp(nt, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096), [&](const auto& range) {
@@ -273,8 +265,8 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             // Every cell the segment passes through (Amanatides & Woo's traversal), with the middle of its stretch
             // there weighted by the stretch's length: clips of any size count.
             const Eigen::Vector3d qa = voxmap.index_of(a), qb = voxmap.index_of(b), d = qb - qa;
-            Index3 c{std::int64_t(std::floor(qa.x())), std::int64_t(std::floor(qa.y())), std::int64_t(std::floor(qa.z()))};
-            const Index3 last{std::int64_t(std::floor(qb.x())), std::int64_t(std::floor(qb.y())), std::int64_t(std::floor(qb.z()))};
+            Index3 c = cell_containing(qa);
+            const Index3 last = cell_containing(qb);
             double t = 0;
             for (int guard = 0; guard < 4096; ++guard) {
                 double exit = 1;

@@ -5,7 +5,9 @@
 #include <voxwarp/extract.h>
 
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -17,6 +19,31 @@ using Index3 = std::array<std::int64_t, 3>;
 inline std::uint64_t cell_key(const Index3& c) {
     return std::uint64_t(c[0] + 2) | std::uint64_t(c[1] + 2) << 21 | std::uint64_t(c[2] + 2) << 42;
 }
+
+/// The cell (voxel index of its low corner) holding a point given in index space.
+inline Index3 cell_containing(const Eigen::Vector3d& q) {
+    return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
+}
+
+/// Ids hashed by the cells a box (index space) covers: the feature surface's triangles, the sharp edges.
+class CellBuckets {
+public:
+    void add(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::uint32_t id) {
+        const Index3 a = cell_containing(lo), b = cell_containing(hi);
+        for (std::int64_t z = a[2]; z <= b[2]; ++z)
+            for (std::int64_t y = a[1]; y <= b[1]; ++y)
+                for (std::int64_t x = a[0]; x <= b[0]; ++x) cells_[cell_key({x, y, z})].push_back(id);
+    }
+    /// The ids in the cell with this key, or none.
+    const std::vector<std::uint32_t>& at(std::uint64_t key) const {
+        static const std::vector<std::uint32_t> none;
+        const auto it = cells_.find(key);
+        return it == cells_.end() ? none : it->second;
+    }
+
+private:
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
+};
 
 /// `mesh`, marching cubes' output for `voxmap` (every vertex on a grid edge, every triangle in one cell), with
 /// the cells that hold a sharp part re-meshed as fans around their feature points and those points joined.
