@@ -241,6 +241,123 @@ TEST(Warp, ClampedCaptureWarpsTheSameData) {
     EXPECT_LE(sum / double(mesh.vertices.size()) / input.voxel_size, 0.25);
 }
 
+/// A plate 0.4 voxel thick (voxel 0.05), 2 x 2, turned by `turn`: the voxmap keeps it as one layer of inside
+/// voxels just above 0.5 (voxelize's thin walls), the case the box filter loses.
+Voxmap thin_plate(const Eigen::Matrix3d& turn) {
+    TriangleMesh plate = test::box_mesh({-1, -1, -0.01}, {1, 1, 0.01}, 2);
+    for (auto& v : plate.vertices) v = turn * v;
+    return voxelize(plate, {.voxel_size = 0.05, .sign = SignMethod::winding_number});
+}
+
+/// `rest` moved by the affine map x -> A x + t (a B-spline lattice reproduces it exactly).
+Lattice affine(const Lattice& rest, const Eigen::Matrix3d& A, const Eigen::Vector3d& t) {
+    Lattice moved = rest;
+    for (auto& p : moved.points()) p = A * p + t;
+    return moved;
+}
+
+TEST(Warp, ThinPlateKeepsItsTopologyUnderTurnsStretchesAndSqueezes) {
+    // Twelve turned plates, each turned further, stretched 1.5x or squeezed to 0.7 along its normal, and shifted by
+    // a fraction of a voxel. Without carrying thin voxels (resolve.h) every one of these came apart in holes.
+    for (int trial = 0; trial < 12; ++trial) {
+        const Eigen::Matrix3d turn = Eigen::AngleAxisd(0.3 + 0.37 * trial, Eigen::Vector3d(1, 0.3 * trial, 0.5).normalized()).toRotationMatrix();
+        const Voxmap input = thin_plate(turn);
+        const MeshTopology before = topology(extract(input));
+        ASSERT_EQ(before.components, 1);
+        ASSERT_EQ(before.euler, 2);
+        const WarpDomain domain = make_domain(input, {});
+        const Eigen::Vector3d normal = turn.col(2);
+        const double along_normal = trial % 3 == 0 ? 1.0 : trial % 3 == 1 ? 1.5 : 0.7;
+        const Eigen::Matrix3d A = Eigen::AngleAxisd(0.3, Eigen::Vector3d(0.2, 1, 0.4).normalized()).toRotationMatrix() *
+                                  (Eigen::Matrix3d::Identity() + (along_normal - 1) * normal * normal.transpose());
+        const Eigen::Vector3d shift(0.013 * trial, 0.021, 0.007 * trial);
+        const TriangleMesh out = extract(warp(domain, affine(domain.lattice, A, shift)));
+        const MeshTopology after = topology(out);
+        EXPECT_TRUE(after.watertight()) << "trial " << trial;
+        EXPECT_EQ(after.components, 1) << "trial " << trial;
+        EXPECT_EQ(after.euler, 2) << "trial " << trial;
+        // The output stays about as close to the plate's image (its mid-plane) as the round trip is to the plate:
+        // the carried layer is a voxel or two thick, not more. Distances along the image of the plate's normal.
+        auto farthest = [&](const TriangleMesh& mesh, const Eigen::Matrix3d& map, const Eigen::Vector3d& offset) {
+            double worst = 0;
+            for (const auto& v : mesh.vertices) {
+                const double z = (turn.transpose() * (map.inverse() * (v - offset))).z(); // in the plate's frame
+                worst = std::max(worst, (map * normal * z).norm());
+            }
+            return worst / input.voxel_size;
+        };
+        const double round_trip = farthest(extract(input), Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+        // (A turned layer's image box reaches up to a voxel and a half past its image when stretched.)
+        EXPECT_LT(farthest(out, A, shift), along_normal * round_trip + 1.5) << "trial " << trial << ", round trip " << round_trip;
+    }
+}
+
+TEST(Warp, ThinPartsMatchTheNaiveReference) {
+    const Voxmap input = thin_plate(Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 0.5).normalized()).toRotationMatrix());
+    const WarpDomain domain = make_domain(input, {.size = {6, 6, 6}});
+    const Lattice moved = jiggled(domain.lattice, 7, 0.8 * input.voxel_size);
+    const Voxmap fast = to_dense(warp(domain, moved));
+    EXPECT_LE(max_difference(fast, warp_reference(domain, moved)), 1e-6);
+    std::size_t carried = 0; // the plate was carried somewhere (kCarriedInside is 0.5 + 1/64)
+    for (float d : fast.density) carried += d == 0.5f + 1.0f / 64.0f;
+    EXPECT_GT(carried, 0u);
+}
+
+TEST(Warp, IncrementalEqualsFullRecomputeWithThinParts) {
+    const Voxmap input = thin_plate(Eigen::AngleAxisd(0.5, Eigen::Vector3d(0.3, 1, 0.2).normalized()).toRotationMatrix());
+    const WarpDomain domain = make_domain(input, {.size = {7, 7, 7}});
+    Warp progressive(domain, domain.lattice);
+    std::mt19937 rng(9);
+    std::uniform_int_distribution<int> index(0, 6);
+    std::normal_distribution<double> n(0, 1.5 * input.voxel_size);
+    for (int step = 0; step < 10; ++step) {
+        const int i = index(rng), j = index(rng), k = index(rng);
+        progressive.move_control_point(i, j, k, progressive.lattice().point(i, j, k) + Eigen::Vector3d(n(rng), n(rng), n(rng)));
+    }
+    EXPECT_EQ(max_difference(to_dense(progressive.target()), to_dense(warp(domain, progressive.lattice()))), 0.0);
+}
+
+/// A fog volume: `inside` within a sphere of radius 0.8, 0 outside, a linear ramp two voxels wide between.
+Voxmap fog_sphere(float inside, double h = 0.05) {
+    Voxmap v({48, 48, 48}, Eigen::Vector3d::Constant(-1.2), h);
+    for (std::int64_t k = 0; k < 48; ++k)
+        for (std::int64_t j = 0; j < 48; ++j)
+            for (std::int64_t i = 0; i < 48; ++i) {
+                const double r = v.world(double(i), double(j), double(k)).norm();
+                v.at(i, j, k) = float(inside * std::clamp(0.5 - (r - 0.8) / (2 * h), 0.0, 1.0));
+            }
+    return v;
+}
+
+TEST(Warp, FogVolumesKeepTheirDensityAndTopology) {
+    // A voxmap whose inside is not full (fog, CT data): the inside keeps its value, not 1, and the 0.5 isosurface
+    // keeps its topology (a sphere for 0.6 and 1.0; no surface at all for 0.3).
+    for (const float inside : {0.3f, 0.6f, 1.0f}) {
+        const Voxmap input = fog_sphere(inside);
+        const WarpDomain domain = make_domain(input, {.size = {7, 7, 7}});
+        const Lattice moved = jiggled(domain.lattice, 4, 1.2 * input.voxel_size);
+        const Voxmap out = to_dense(warp(domain, moved));
+        float deep_low = 2, deep_high = -1, highest = 0;
+        for (std::int64_t k = 0; k < out.dims[2]; ++k)
+            for (std::int64_t j = 0; j < out.dims[1]; ++j)
+                for (std::int64_t i = 0; i < out.dims[0]; ++i) {
+                    const float d = out.at(i, j, k);
+                    highest = std::max(highest, d);
+                    if (out.world(double(i), double(j), double(k)).norm() < 0.5) deep_low = std::min(deep_low, d), deep_high = std::max(deep_high, d);
+                }
+        EXPECT_NEAR(deep_low, inside, 1e-5) << inside;
+        EXPECT_NEAR(deep_high, inside, 1e-5) << inside;
+        if (inside < 0.5f) {
+            EXPECT_LT(highest, 0.5f);
+        } else {
+            const MeshTopology t = topology(extract(out));
+            EXPECT_TRUE(t.watertight()) << inside;
+            EXPECT_EQ(t.components, 1) << inside;
+            EXPECT_EQ(t.euler, 2) << inside;
+        }
+    }
+}
+
 TEST(Foldover, DeliberateFoldIsReported) {
     const Lattice rest = Lattice::uniform({9, 9, 9}, {0, 0, 0}, {1, 1, 1});
     EXPECT_TRUE(find_folds(rest).empty());

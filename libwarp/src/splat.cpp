@@ -5,11 +5,13 @@
 #include <voxwarp/resources.h>
 #include <voxwarp/warp.h>
 
+#include "carry.h"
 #include "resolve.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <atomic>
@@ -17,6 +19,7 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <tuple>
 #include <utility>
 
 namespace voxwarp {
@@ -143,6 +146,12 @@ private:
     tbb::enumerable_thread_specific<Arena> arenas_;
 };
 
+/// What a region's carried voxels (resolve.h) carry through the map as it stands.
+struct RegionCarry {
+    std::vector<CarryImage> images;
+    std::vector<Carry> cells; // their images' cells
+};
+
 /// The splat of one domain voxel. The paper takes the bounding box of the six mapped face centres; under a
 /// rotation that box is smaller than the voxel's image (0.71 wide at 45 degrees), so splats stop covering
 /// the target and density is lost (a quarter of it at 30 degrees). Instead: the exact bounding box of the
@@ -186,6 +195,7 @@ public:
             regions_[a] = domain.lattice.regions()[a];
         }
         find_band();
+        find_thin();
     }
 
     std::array<int, 3> regions() const { return regions_; }
@@ -194,7 +204,8 @@ public:
     bool active(std::size_t r) const { return active_[r] != 0; }
 
     /// Map the band voxels of region (a, b, c) through `lattice` and visit each with its splat box [lo, hi]
-    /// (target index units), mass share and density. Separable, as in the paper's section 4: the region's 64
+    /// (target index units), mass share, density, index within the region (e - e0 + Gx (f - f0 + Gy (g - g0)),
+    /// increasing in visiting order) and the map's derivatives per voxel step (the image's edges). Separable, as in the paper's section 4: the region's 64
     /// control points are contracted with the z table once per slice, with the y table once per row, and with
     /// the x table per voxel; the derivative tables give the Jacobian the same way. Only rows holding band
     /// voxels are contracted at all.
@@ -248,9 +259,10 @@ public:
                     for (std::int64_t e = first; e <= last; ++e) {
                         const auto& bx = table_[0][std::size_t(e - e0)];
                         const Eigen::Vector3d centre = combine(bx.value, q);
-                        const VoxelImage image = voxel_image(centre, combine(bx.slope, q), combine(bx.value, qy), combine(bx.value, qz));
+                        const Eigen::Vector3d ex = combine(bx.slope, q), ey = combine(bx.value, qy), ez = combine(bx.value, qz);
+                        const VoxelImage image = voxel_image(centre, ex, ey, ez);
                         const std::int64_t vx = e - domain_.offset[0];
-                        visit(centre, image.lo, image.hi, density_at(vx), image.mass);
+                        visit(centre, image.lo, image.hi, density_at(vx), image.mass, std::uint32_t((e - e0) + gx * (m + gy * l)), ex, ey, ez);
                     }
                 }
             }
@@ -344,12 +356,33 @@ public:
     }
 
     /// Add (sign = +1) or remove (sign = -1) a mapped region's contributions; returns the bounds of the cells
-    /// written. A cell outside the accumulator's box is not written and sets `overflow`.
-    Box splat_region(const Lattice& lattice, int a, int b, int c, bool preview, int sign, BlockAccumulator& acc, bool& overflow) const {
+    /// written. A cell outside the accumulator's box is not written and sets `overflow`. With `carried`, the
+    /// target cells the region's thin voxels carry (resolve.h) are appended to it.
+    Box splat_region(const Lattice& lattice, int a, int b, int c, bool preview, int sign, BlockAccumulator& acc, bool& overflow,
+                     RegionCarry* carried = nullptr) const {
         const Index3 origin = acc.box.lo, extent{acc.box.hi[0] - acc.box.lo[0], acc.box.hi[1] - acc.box.lo[1], acc.box.hi[2] - acc.box.lo[2]};
         Box box;
         Footprint fp;
-        for_each_box(lattice, a, b, c, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float density, double mass) {
+        const auto& thin = thin_[region_index(a, b, c)];
+        auto next_thin = thin.begin();
+        const std::uint64_t gx = std::uint64_t(domain_.granularity[0]), gy = std::uint64_t(domain_.granularity[1]), gz = std::uint64_t(domain_.granularity[2]);
+        const std::array<std::uint64_t, 3> dims{std::uint64_t(domain_.dims[0]), std::uint64_t(domain_.dims[1]), std::uint64_t(domain_.dims[2])};
+        for_each_box(lattice, a, b, c, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float density, double mass,
+                                           std::uint32_t local, const Eigen::Vector3d& ex, const Eigen::Vector3d& ey, const Eigen::Vector3d& ez) {
+            if (carried && next_thin != thin.end()) { // both in visiting order: a merge
+                while (next_thin != thin.end() && *next_thin < local) ++next_thin;
+                if (next_thin != thin.end() && *next_thin == local) {
+                    const std::uint64_t e = std::uint64_t(a) * gx + local % gx, f = std::uint64_t(b) * gy + (local / gx) % gy,
+                                        g = std::uint64_t(c) * gz + local / (gx * gy);
+                    const bool inside = density >= 0.5f;
+                    const auto cell = nearest_cell(centre.data());
+                    carried->images.push_back({e + dims[0] * (f + dims[1] * g), cell, inside});
+                    box.include(cell, cell);
+                    Eigen::Matrix3d J;
+                    J << ex, ey, ez;
+                    image_cells(centre, J, [&](const Index3& x) { carried->cells.push_back({x, inside}); });
+                }
+            }
             footprint(centre, lo, hi, preview, fp);
             if (fp.count[0] == 0 || fp.count[1] == 0 || fp.count[2] == 0) return; // a preview box between cell centres
             const Index3 last{fp.first[0] + fp.count[0] - 1, fp.first[1] + fp.count[1] - 1, fp.first[2] + fp.count[2] - 1};
@@ -551,6 +584,26 @@ private:
 
     using Run = std::array<std::int32_t, 2>; // first and last band voxel of a run, near-grid x
 
+    /// The carried voxels (resolve.h, carry.h) of every region, as sorted indices within the region (the order
+    /// for_each_box visits them in). They lie in the band: each has a voxel of the other side within three.
+    void find_thin() {
+        thin_.assign(region_count(), {});
+        const auto& vm = domain_.voxmap;
+        if (vm.empty()) return;
+        const auto& n = vm.dims();
+        const int gx = domain_.granularity[0], gy = domain_.granularity[1], gz = domain_.granularity[2];
+        for (const std::uint64_t v : carried_voxels(vm)) {
+            const std::int64_t e = std::int64_t(v % std::uint64_t(n[0])) + domain_.offset[0], f = std::int64_t((v / std::uint64_t(n[0])) % std::uint64_t(n[1])) + domain_.offset[1],
+                               g = std::int64_t(v / std::uint64_t(n[0] * n[1])) + domain_.offset[2];
+            if (e < 0 || f < 0 || g < 0 || e >= domain_.dims[0] || f >= domain_.dims[1] || g >= domain_.dims[2]) continue;
+            const int a = int(e / gx), b = int(f / gy), c = int(g / gz);
+            thin_[region_index(a, b, c)].push_back(std::uint32_t((e - std::int64_t(a) * gx) + gx * ((f - std::int64_t(b) * gy) + gy * (g - std::int64_t(c) * gz))));
+        }
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, thin_.size()), [&](const auto& r) {
+            for (std::size_t q = r.begin(); q != r.end(); ++q) std::sort(thin_[q].begin(), thin_[q].end());
+        });
+    }
+
     /// The band's runs along domain row (f, g).
     std::pair<const Run*, const Run*> band_runs(std::int64_t f, std::int64_t g) const {
         const std::int64_t j = f - domain_.offset[1] + kReach, k = g - domain_.offset[2] + kReach;
@@ -574,6 +627,7 @@ private:
     std::array<std::int64_t, 3> near_dims_{};
     std::vector<std::uint64_t> run_offsets_; // per near-grid row (j + ny k), into runs_
     std::vector<Run> runs_;
+    std::vector<std::vector<std::uint32_t>> thin_; // per region
 };
 
 } // namespace warp_internal
@@ -592,6 +646,18 @@ struct Warp::State {
     Box target; // the result's bounds, target index space
     SparseVoxmap result;
     WarpDomain* consumed = nullptr; // a one-shot warp's domain, emptied once splatted
+    std::vector<RegionCarry> carried; // per region, what its carried voxels carry (resolve.h)
+    std::vector<Carry> carry_index;   // all the cells carried, sorted by carry_less
+
+    void gather_carried() {
+        std::vector<CarryImage> images;
+        std::vector<Carry> cells;
+        for (const auto& region : carried) {
+            images.insert(images.end(), region.images.begin(), region.images.end());
+            cells.insert(cells.end(), region.cells.begin(), region.cells.end());
+        }
+        carry_index = link_carries(images, std::move(cells), domain.dims);
+    }
 
     std::vector<std::size_t> active_regions() const {
         std::vector<std::size_t> out;
@@ -639,7 +705,9 @@ struct Warp::State {
                 const auto [a, b, c] = unpack(batch[q]);
                 bool out = false;
                 if (previous) splatter->splat_region(*previous, a, b, c, options.preview, -sign, acc, out);
-                exact[q] = splatter->splat_region(lattice, a, b, c, options.preview, sign, acc, out);
+                RegionCarry* list = sign > 0 ? &carried[batch[q]] : nullptr;
+                if (list) list->images.clear(), list->cells.clear();
+                exact[q] = splatter->splat_region(lattice, a, b, c, options.preview, sign, acc, out, list);
                 if (out) overflow = true;
             };
             if (disjoint)
@@ -682,9 +750,6 @@ struct Warp::State {
                     }
                     const std::int64_t ay = y + target.lo[1] - acc.box.lo[1], az = z + target.lo[2] - acc.box.lo[2];
                     bool inside = false;
-                    // The preview's tents: a cell's weighted mean whatever its weight (the full warp's "one" is a
-                    // whole voxel's coverage).
-                    const std::int32_t one = options.preview ? 1 : std::int32_t(kFixedOne);
                     for (std::int64_t x = 0; x < nx;) { // one accumulator block at a time
                         const std::int64_t ax = x + target.lo[0] - acc.box.lo[0];
                         const std::int64_t end = std::min(nx - 1, x + (BlockAccumulator::kSide - 1 - (ax & 7)));
@@ -693,9 +758,20 @@ struct Warp::State {
                             std::fill(out + x, out + end + 1, inside ? 1.0f : 0.0f);
                         } else {
                             const Cell* cell = cells + BlockAccumulator::offset(ax, ay, az);
-                            for (std::int64_t p = x; p <= end; ++p, ++cell) out[p] = resolve_density(cell->weight, cell->value, one, inside);
+                            for (std::int64_t p = x; p <= end; ++p, ++cell) out[p] = resolve_density(cell->weight, cell->value, inside);
                         }
                         x = end + 1;
+                    }
+                    // Thin parts the box filter lost, put back (resolve.h).
+                    const Carry row_start{{std::numeric_limits<std::int64_t>::min(), y + target.lo[1], z + target.lo[2]}, false};
+                    auto c = std::lower_bound(carry_index.begin(), carry_index.end(), row_start, carry_less);
+                    while (c != carry_index.end() && c->cell[1] == row_start.cell[1] && c->cell[2] == row_start.cell[2]) {
+                        const std::int64_t x = c->cell[0];
+                        bool in = false, outside = false;
+                        for (; c != carry_index.end() && c->cell[0] == x && c->cell[1] == row_start.cell[1] && c->cell[2] == row_start.cell[2]; ++c)
+                            (c->inside ? in : outside) = true;
+                        const std::int64_t p = x - target.lo[0];
+                        if (p >= 0 && p < nx) out[p] = carried_density(out[p], in, outside);
                     }
                 }
                 for (std::int64_t bx = 0; bx < result.block_dims()[0]; ++bx) {
@@ -724,6 +800,7 @@ struct Warp::State {
                        "warp target of " + std::to_string(bound.hi[0] - bound.lo[0] + 1) + "x" + std::to_string(bound.hi[1] - bound.lo[1] + 1) + "x" +
                            std::to_string(bound.hi[2] - bound.lo[2] + 1) + " voxels");
         acc.reset(bound);
+        carried.assign(splatter->region_count(), {});
         if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
         if (consumed) consumed->voxmap = SparseVoxmap(); // the splat was its last use: free it before the result grows
         target = Box();
@@ -734,6 +811,7 @@ struct Warp::State {
         for (std::size_t i = 0; i < 3; ++i) dims[i] = target.hi[i] - target.lo[i] + 1;
         result = SparseVoxmap(dims, domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(target.lo[0]), double(target.lo[1]), double(target.lo[2])),
                               domain.target_voxel_size);
+        gather_carried();
         resolve_rows(target);
     }
 };
@@ -798,6 +876,8 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
         return;
     }
     touched.include(after);
+    // The rows the moved regions' carried cells left or reached lie in the old and new boxes: resolved again.
+    s.gather_carried();
     if (!touched.empty()) s.resolve_rows(touched);
 }
 
