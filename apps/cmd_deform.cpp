@@ -19,7 +19,7 @@ namespace voxwarp::cli {
 namespace {
 
 struct DeformArgs {
-    std::string input, edits, output, report, png, mode = "volume";
+    std::string input, edits, output, report, png, mode = "volume", sign = "auto";
     DeformOptions options;
     double max_memory_gib = 0;
 };
@@ -81,6 +81,9 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("--mode", a->mode, "volume (re-polygonized, crease-free) or vertex (classic FFD of the input's vertices, for comparison)")
         ->check(CLI::IsMember({"volume", "vertex"}))
         ->capture_default_str();
+    cmd->add_option("--sign", a->sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
+        ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
+        ->capture_default_str();
     add_mesher_option(cmd, a->options.extract.mesher);
     cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
@@ -94,6 +97,7 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
             if (!is_mesh_path(a->output)) throw InvalidInput(a->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
             if (!a->png.empty() && std::filesystem::path(a->png).extension() != ".png") throw InvalidInput(a->png + ": expected a .png picture");
             a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
+            a->options.voxelize.sign = parse_sign(a->sign);
             a->options.progress = stderr_progress(global);
             const EditScript script = read_edit_file(a->edits);
             DeformReport report;

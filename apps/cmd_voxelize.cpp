@@ -22,21 +22,23 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
                     ->capture_default_str();
     cmd->add_option("--voxel-size", args->options.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res);
     cmd->add_option("--padding", args->options.padding_voxels, "Empty voxels around the mesh")->capture_default_str();
-    cmd->add_option("--sign", args->sign, "Inside/outside test: auto, flood-fill (watertight input) or winding-number (scans)")
+    cmd->add_option("--sign", args->sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
         ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
         ->capture_default_str();
     cmd->add_option("--max-memory", args->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
     cmd->callback([args, &global, &action] {
         action = [args, &global] {
             auto& o = args->options;
-            o.sign = args->sign == "flood-fill" ? SignMethod::flood_fill
-                     : args->sign == "winding-number" ? SignMethod::winding_number : SignMethod::automatic;
+            o.sign = parse_sign(args->sign);
+            VoxelizeReport done;
+            o.report = &done;
             o.max_memory_bytes = std::uint64_t(args->max_memory_gib * double(1ull << 30));
             o.progress = stderr_progress(global);
             const TriangleMesh mesh = read_mesh(args->input);
             const SparseVoxmap voxmap = naming_source(args->input, [&] { return voxelize_sparse(mesh, o); });
             write_vdb(voxmap, args->output);
             const auto& n = voxmap.dims();
+            if (!done.note.empty()) note(global, "voxelize: " + done.note);
             note(global, "wrote " + args->output + ": " + std::to_string(n[0]) + "x" + std::to_string(n[1]) + "x" + std::to_string(n[2]) +
                              " voxels of size " + std::to_string(voxmap.voxel_size()));
         };

@@ -252,10 +252,7 @@ VoxelizeOptions voxelize_options(int resolution, const py::object& voxel_size, i
     o.resolution = resolution;
     if (!voxel_size.is_none()) o.voxel_size = voxel_size.cast<double>();
     o.padding_voxels = padding;
-    if (sign == "auto") o.sign = SignMethod::automatic;
-    else if (sign == "flood-fill") o.sign = SignMethod::flood_fill;
-    else if (sign == "winding-number") o.sign = SignMethod::winding_number;
-    else throw InvalidInput("sign: expected \"auto\", \"flood-fill\" or \"winding-number\", got \"" + sign + "\"");
+    o.sign = parse_sign(sign);
     if (!max_memory.is_none()) o.max_memory_bytes = std::uint64_t(max_memory.cast<double>() * double(1ull << 30));
     return o;
 }

@@ -273,9 +273,10 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
 namespace deform_internal {
 
 // Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization.
-SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress) {
+SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report) {
     VoxelizeOptions vo = options;
     vo.progress = progress;
+    vo.report = report;
     // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
     // voxel of surface area, measured on the bunny); the extracted mesh takes less than that.
     const Voxmap frame = voxelize_frame(mesh, vo);
@@ -331,8 +332,11 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
 
 TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     const auto t = Clock::now();
-    SparseVoxmap voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress);
+    VoxelizeReport voxelized;
+    SparseVoxmap voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress, &voxelized);
     report.seconds_voxelize = seconds_since(t);
+    report.sign = to_string(voxelized.sign);
+    report.sign_note = voxelized.note;
     return deform_voxelized(mesh, std::move(voxmap), script, options, report);
 }
 

@@ -28,6 +28,8 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
     nlohmann::json j;
     for (const auto& [key, value] : fields) j[key] = value;
     j["mode"] = r.mode;
+    if (!r.sign.empty()) j["sign"] = r.sign;
+    if (!r.sign_note.empty()) j["sign_note"] = r.sign_note;
     j["voxel_size"] = r.voxel_size;
     j["dims"] = {r.dims[0], r.dims[1], r.dims[2]};
     j["volume_before"] = r.volume_before;
@@ -84,6 +86,7 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
 std::vector<std::string> deform_warnings(const DeformReport& r) {
     std::vector<std::string> out;
     char line[512];
+    if (!r.sign_note.empty()) out.push_back("voxelize: " + r.sign_note);
     for (const auto& e : r.edits) {
         for (const auto& c : e.constraints) {
             if (c.residual_voxels > 0.5) {

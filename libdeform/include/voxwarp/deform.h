@@ -75,6 +75,8 @@ struct ThinPart {
 
 struct DeformReport {
     std::string mode = "volume";     ///< "volume" (re-polygonized) or "vertex" (classic FFD of the input's vertices)
+    std::string sign;                ///< mesh input, volume mode: the inside/outside test used ("flood-fill", "winding-number")
+    std::string sign_note;           ///< why `--sign auto` gave up the flood fill, if it did
     double voxel_size = 0;
     std::array<std::int64_t, 3> dims{};
     double volume_before = 0, volume_after = 0; ///< world units^3: enclosed by the input and output meshes (voxmap mass for voxmaps)
@@ -99,8 +101,9 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
 /// baseline the papers argue against), for comparison.
 TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report);
 
-/// Warnings a user should see about a finished run, one line each (no "warning:" prefix): constraints that miss
-/// their targets by more than half a voxel (with the cause where known), maps that still fold, thin parts lost.
+/// Warnings a user should see about a finished run, one line each (no "warning:" prefix): a flood fill given up for
+/// winding numbers, constraints that miss their targets by more than half a voxel (with the cause where known), maps
+/// that still fold, thin parts lost.
 std::vector<std::string> deform_warnings(const DeformReport& report);
 
 /// The report as the JSON text `voxwarp deform --report` writes (schema in README.md, "Reports"). `fields` are

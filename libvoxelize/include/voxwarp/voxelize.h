@@ -6,9 +6,10 @@
 /// ends lie within one voxel of it, so with ramp >= 1 the 0.5 crossing interpolated between voxel centres
 /// lands exactly where the surface crosses that edge (for a locally flat surface).
 ///
-/// Inside/outside: a watertight, consistently oriented mesh is signed by OpenVDB's level-set construction;
-/// anything else (holes, non-manifold edges, inconsistent orientation) by the generalized winding number
-/// thresholded at 0.5, which closes small holes with a minimal-looking cap and ignores stray triangles.
+/// Inside/outside: a watertight, consistently oriented mesh is signed by OpenVDB's level-set construction, unless
+/// that flood fill loses the mesh's surface or its walls are thinner than a voxel (then, with SignMethod::automatic,
+/// the winding number takes over, and VoxelizeReport says why); anything else (holes, non-manifold edges,
+/// inconsistent orientation) by the generalized winding number thresholded at 0.5, which closes small holes with a minimal-looking cap and ignores stray triangles.
 /// On that path walls thinner than a voxel are kept closed (a voxel next to the wall is made inside) and the
 /// densities next to the surface are refit so that the 0.5 crossing along each voxel edge lands where the mesh
 /// crosses that edge. Open sheets enclose no volume and vanish from the voxmap.
@@ -21,15 +22,27 @@
 #include <voxwarp/voxmap.h>
 
 #include <cstdint>
+#include <string>
 
 namespace voxwarp {
 
 /// How voxelize decides which voxels are inside.
 enum class SignMethod {
-    automatic,      ///< flood_fill for watertight oriented meshes, winding_number otherwise
+    automatic,      ///< flood_fill for watertight oriented meshes whose flood fill holds, winding_number otherwise
     flood_fill,     ///< OpenVDB meshToLevelSet: fast, exact for watertight input, leaks through holes
     winding_number, ///< generalized winding number >= 0.5: robust to holes and non-manifold spots
 };
+
+/// What voxelize did, for reports.
+struct VoxelizeReport {
+    SignMethod sign = SignMethod::automatic; ///< the inside/outside test it used
+    std::string note;                        ///< why `automatic` gave up the flood fill for winding numbers; empty otherwise
+};
+
+/// "auto", "flood-fill" or "winding-number".
+const char* to_string(SignMethod method);
+/// The method a name gives (to_string's names). @throw InvalidInput for any other name.
+SignMethod parse_sign(const std::string& name);
 
 struct VoxelizeOptions {
     int resolution = 128;         ///< voxels along the mesh's longest bounding-box side (used when voxel_size <= 0)
@@ -39,6 +52,7 @@ struct VoxelizeOptions {
     SignMethod sign = SignMethod::automatic;
     std::uint64_t max_memory_bytes = 0; ///< refuse requests estimated above this; 0 = 90 % of available memory
     ProgressCallback progress;          ///< optional progress / cancel
+    VoxelizeReport* report = nullptr;   ///< optional: filled with what voxelize did
 };
 
 /// Voxel size and grid that voxelize would use for this mesh and these options (no heavy work).
