@@ -272,8 +272,9 @@ TriangleMesh joined(TriangleMesh a, const TriangleMesh& b) {
 }
 
 TEST(ThinParts, APlateBetweenVoxelCentresIsReportedAndTheAdvisedResolutionKeepsIt) {
-    // A 2-unit cube and, beside it, a plate 0.3 voxel thick lying between two planes of voxel centres: the flood
-    // fill (the mesh is closed) finds no centre inside the plate, and the plate vanishes.
+    // A 2-unit cube and, beside it, a plate 0.3 voxel thick lying between two planes of voxel centres: a flood fill
+    // (the mesh is closed) finds no centre inside the plate, and the plate vanishes. --sign auto sees that and
+    // keeps the plate by winding numbers.
     const int resolution = 24;
     const double h = 5.0 / resolution; // the longest side is 5 (x from 0 to 5)
     const double z0 = 4 * h + 0.35 * h, z1 = z0 + 0.3 * h; // centres lie at z = (k - 3) h
@@ -282,6 +283,12 @@ TEST(ThinParts, APlateBetweenVoxelCentresIsReportedAndTheAdvisedResolutionKeepsI
     script.edits.push_back({{pin({0, 0, 0})}});
     DeformOptions options;
     options.voxelize.resolution = resolution;
+    DeformReport automatic;
+    EXPECT_EQ(topology(deform_mesh(mesh, script, options, automatic)).components, 2);
+    EXPECT_EQ(automatic.sign, "winding-number");
+    EXPECT_NE(automatic.sign_note.find("flood fill put the two sides of the surface wrong"), std::string::npos) << automatic.sign_note;
+    EXPECT_TRUE(automatic.thin_parts.empty());
+    options.voxelize.sign = SignMethod::flood_fill;
     DeformReport report;
     const TriangleMesh out = deform_mesh(mesh, script, options, report);
     ASSERT_NEAR(report.voxel_size, h, 1e-12);

@@ -581,5 +581,41 @@ TEST(Voxelize, WindingNumberAgreesWithFloodFillOnWatertightInput) {
     EXPECT_LE(worst, 0.05);
 }
 
+TEST(Voxelize, AutoSignGivesUpAFloodFillThatLeaksOrLosesWalls) {
+    // A closed box with a box-shaped cavity, its wall 0.36 voxel thick: flood fill finds no voxel centre in the wall
+    // and fills the cavity (a solid box); winding numbers keep the wall, two surfaces.
+    TriangleMesh shell = test::box_mesh({-1, -1, -1}, {1, 1, 1}, 4);
+    const TriangleMesh cavity = test::box_mesh(Eigen::Vector3d::Constant(-0.985), Eigen::Vector3d::Constant(0.985), 4);
+    const auto offset = std::int32_t(shell.vertices.size());
+    shell.vertices.insert(shell.vertices.end(), cavity.vertices.begin(), cavity.vertices.end());
+    for (const auto& t : cavity.triangles) shell.triangles.push_back({t[0] + offset, t[2] + offset, t[1] + offset}); // facing in
+    ASSERT_TRUE(topology(shell).watertight());
+    VoxelizeReport done;
+    const MeshTopology flood = topology(extract(voxelize(shell, {.resolution = 48, .sign = SignMethod::flood_fill})));
+    EXPECT_EQ(flood.components, 1); // the failure auto must catch
+    const MeshTopology automatic = topology(extract(voxelize(shell, {.resolution = 48, .report = &done})));
+    EXPECT_EQ(automatic.components, 2);
+    EXPECT_EQ(automatic.euler, 4);
+    EXPECT_EQ(done.sign, SignMethod::winding_number);
+    EXPECT_NE(done.note.find("used winding numbers"), std::string::npos) << done.note;
+    // The tool's own output fed back: the snowden scan's round trip, voxelized again at the same resolution. Flood
+    // fill leaks through its walls (419 pieces at 64 before auto looked); auto gives winding numbers' topology.
+    const TriangleMesh own = extract(voxelize(read_mesh(test::data_path("snowden_lo.obj")), {.resolution = 64}));
+    for (const int resolution : {64, 128}) {
+        const MeshTopology a = topology(extract(voxelize(own, {.resolution = resolution, .report = &done})));
+        const MeshTopology w = topology(extract(voxelize(own, {.resolution = resolution, .sign = SignMethod::winding_number})));
+        EXPECT_EQ(done.sign, SignMethod::winding_number) << resolution;
+        EXPECT_EQ(a.components, w.components) << resolution;
+        EXPECT_EQ(a.euler, w.euler) << resolution;
+    }
+    // Clean solids keep the flood fill: smooth (the bunny) and sharp (a turned box).
+    for (const char* name : {"bunny.obj", "box.obj"}) {
+        TriangleMesh mesh = read_mesh(test::data_path(name));
+        for (auto& v : mesh.vertices) v = turn(20, 30, 40) * v;
+        voxelize(mesh, {.resolution = 64, .report = &done});
+        EXPECT_EQ(done.sign, SignMethod::flood_fill) << name << ": " << done.note;
+    }
+}
+
 } // namespace
 } // namespace voxwarp
