@@ -205,7 +205,12 @@ def test_thin_parts_are_reported():
     V1, F1 = box((0, 0, 0), (2, 2, 2))
     V2, F2 = box((3, 0.2, 4.35 * h), (5, 1.8, 4.65 * h))
     V, F = np.vstack([V1, V2]), np.vstack([F1, F2 + len(V1)]).astype(np.int32)
-    _, _, report = voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0.0, 0.0, 0.0]}]}]}, resolution=24)
+    edit = {"edits": [{"constraints": [{"pin": [0.0, 0.0, 0.0]}]}]}
+    # sign="auto" sees the flood fill lose the plate and keeps it by winding numbers; a flood fill by name loses it.
+    _, _, kept = voxwarp.deform(V, F, edit, resolution=24)
+    assert kept["sign"] == "winding-number" and "flood fill" in kept["sign_note"] and not kept["thin_parts"]
+    _, _, report = voxwarp.deform(V, F, edit, resolution=24, sign="flood-fill")
+    assert report["sign"] == "flood-fill"
     (part,) = report["thin_parts"]
     assert part["stage"] == "voxelize" and abs(part["thickness_voxels"] - 0.3) < 0.02
     assert np.linalg.norm(np.array(part["centre"]) - [4, 1, 4.5 * h]) < h

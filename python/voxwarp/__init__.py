@@ -16,8 +16,9 @@ Functions
     voxelize(V, F, resolution=128 | voxel_size=h, padding=3, sign="auto", max_memory=None, progress=None) -> Voxmap
     extract(voxmap, isovalue=0.5, adaptivity=0.0, mesher="mc", progress=None) -> (V, F)
     deform(V, F, edit, resolution=128 | voxel_size=h, mode="volume", preview=False, max_steps=8, faces=0,
-           mesher="mc", max_memory=None, progress=None) -> (V, F, report)
+           mesher="mc", sign="auto", max_memory=None, progress=None) -> (V, F, report)
         mesher: "mc" (marching cubes, smooth) or "features" (sharp edges and corners put back), as --mesher;
+        sign: "auto", "flood-fill" or "winding-number", as --sign (the report's "sign" and "sign_note" say which ran);
         edit: a dict in the edit-file schema (README.md, "Edit files") or a path to an edit file;
         report: the dict `voxwarp deform --report` writes (residuals, surface misses, volumes, timings).
 

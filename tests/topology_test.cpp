@@ -1,0 +1,149 @@
+// The warp keeps topology (issue: scans and re-used outputs came out of a warp full of holes). Over families of
+// input a user feeds the tool, at two resolutions, a small and a large fold-free edit must leave the output with
+// the components and Euler characteristic of the round trip (voxelize + extract, no edit), and its surface about
+// as close to the exact warp (the same lattice map applied to the vertices of the input, finely subdivided) as
+// the round trip is to the input.
+#include "test_helpers.h"
+
+#include <voxwarp/deform.h>
+#include <voxwarp/extract.h>
+#include <voxwarp/mesh_io.h>
+#include <voxwarp/surface_distance.h>
+#include <voxwarp/warp.h>
+
+#include <gtest/gtest.h>
+
+#include <map>
+
+namespace voxwarp {
+namespace {
+
+/// Split every triangle into four until no edge is longer than `longest`: the vertex FFD of the result follows
+/// the map between the input's vertices.
+TriangleMesh subdivided(TriangleMesh m, double longest) {
+    for (;;) {
+        double worst = 0;
+        for (const auto& t : m.triangles)
+            for (int e = 0; e < 3; ++e) worst = std::max(worst, (m.vertices[std::size_t(t[std::size_t(e)])] - m.vertices[std::size_t(t[std::size_t((e + 1) % 3)])]).norm());
+        if (worst <= longest) return m;
+        std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> middle;
+        auto midpoint = [&](std::int32_t a, std::int32_t b) {
+            const auto key = std::minmax(a, b);
+            if (const auto it = middle.find(key); it != middle.end()) return it->second;
+            m.vertices.push_back(0.5 * (m.vertices[std::size_t(a)] + m.vertices[std::size_t(b)]));
+            return middle[key] = std::int32_t(m.vertices.size() - 1);
+        };
+        std::vector<std::array<std::int32_t, 3>> finer;
+        for (const auto t : m.triangles) {
+            const std::int32_t a = midpoint(t[0], t[1]), b = midpoint(t[1], t[2]), c = midpoint(t[2], t[0]);
+            finer.insert(finer.end(), {{t[0], a, c}, {a, t[1], b}, {c, b, t[2]}, {a, b, c}});
+        }
+        m.triangles = std::move(finer);
+    }
+}
+
+Constraint constraint(ConstraintKind kind, const Eigen::Vector3d& p, const Eigen::Vector3d& to) {
+    Constraint c;
+    c.kind = kind, c.point = p, c.to = to, c.name = kind == ConstraintKind::pin ? "pin" : "move";
+    return c;
+}
+
+/// A move of a point at 80 % of the model's width by `voxels` voxels (and half that sideways), a pin at 10 %.
+EditScript edit_of(const Bounds& b, double h, double voxels) {
+    const Eigen::Vector3d size = b.size(), centre = 0.5 * (b.min + b.max);
+    const Eigen::Vector3d p = centre + Eigen::Vector3d(0.3 * size.x(), 0.1 * size.y(), 0);
+    EditScript script;
+    script.edits.push_back({{constraint(ConstraintKind::move, p, p + h * Eigen::Vector3d(voxels, 0.5 * voxels, 0)),
+                             constraint(ConstraintKind::pin, centre - Eigen::Vector3d(0.4 * size.x(), 0, 0), {})}});
+    script.edits[0].constraints[1].to = script.edits[0].constraints[1].point;
+    return script;
+}
+
+void expect_topology_kept(const std::string& family, const TriangleMesh& mesh, int resolution) {
+    SCOPED_TRACE(family + " at " + std::to_string(resolution));
+    DeformOptions options;
+    options.voxelize.resolution = resolution;
+    const TriangleMesh round_trip = extract(voxelize(mesh, options.voxelize));
+    const MeshTopology expected = topology(round_trip);
+    const double h = voxelize_frame(mesh, options.voxelize).voxel_size;
+    const double round_trip_p99 = one_sided_distance(mesh, round_trip).p99 / h;
+    const TriangleMesh fine = subdivided(mesh, h);
+    for (const double voxels : {0.5, 4.0}) {
+        SCOPED_TRACE("a move of " + std::to_string(voxels) + " voxels");
+        const EditScript script = edit_of(bounds(mesh), h, voxels);
+        DeformReport report, exact_report;
+        const TriangleMesh out = deform_mesh(mesh, script, options, report);
+        ASSERT_EQ(report.edits[0].steps, 1); // one map, the one deform_vertices applies
+        ASSERT_FALSE(report.edits[0].folds_remain);
+        const MeshTopology t = topology(out);
+        EXPECT_TRUE(t.watertight());
+        EXPECT_EQ(t.components, expected.components);
+        EXPECT_EQ(t.euler, expected.euler);
+        const TriangleMesh exact = deform_vertices(fine, script, options, exact_report);
+        const double p99 = one_sided_distance(exact, out).p99 / h;
+        std::printf("%s at %d, move %.1f voxels: %lld pieces, Euler %lld (round trip %lld, %lld); exact warp to output p99 %.3f voxel (round trip %.3f)\n",
+                    family.c_str(), resolution, voxels, (long long)t.components, (long long)t.euler, (long long)expected.components,
+                    (long long)expected.euler, p99, round_trip_p99);
+        EXPECT_LE(p99, round_trip_p99 + 0.5);
+    }
+}
+
+TEST(KeepsTopology, ScansOpenMeshesThinShellsAndItsOwnOutputs) {
+    const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj")); // 7 holes, 88 non-manifold edges
+    TriangleMesh open = test::sphere_mesh({0, 0, 0}, 1.0, 4);                 // its top cut off: a hole 1.6 wide
+    std::erase_if(open.triangles, [&](const auto& t) {
+        return (open.vertices[std::size_t(t[0])] + open.vertices[std::size_t(t[1])] + open.vertices[std::size_t(t[2])]).z() / 3 > 0.6;
+    });
+    TriangleMesh shell = test::box_mesh({-1, -1, -1}, {1, 1, 1}, 4); // a closed box, hollow behind a wall 0.36-0.48 voxel thick
+    const TriangleMesh cavity = test::box_mesh(Eigen::Vector3d::Constant(-0.985), Eigen::Vector3d::Constant(0.985), 4);
+    const auto offset = std::int32_t(shell.vertices.size());
+    shell.vertices.insert(shell.vertices.end(), cavity.vertices.begin(), cavity.vertices.end());
+    for (const auto& t : cavity.triangles) shell.triangles.push_back({t[0] + offset, t[2] + offset, t[1] + offset});
+    for (const int resolution : {48, 64}) {
+        expect_topology_kept("scan", scan, resolution);
+        expect_topology_kept("open sphere", open, resolution);
+        expect_topology_kept("thin shell", shell, resolution);
+        expect_topology_kept("own output", extract(voxelize(scan, {.resolution = resolution})), resolution);
+    }
+}
+
+TEST(KeepsTopology, TheBundledScanEditAt64) {
+    // data/snowden_nose.json as the README runs it: the round trip's topology (4 pieces, Euler 8 at 64).
+    const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
+    DeformOptions options;
+    options.voxelize.resolution = 64;
+    const MeshTopology expected = topology(extract(voxelize(scan, options.voxelize)));
+    DeformReport report;
+    const MeshTopology t = topology(deform_mesh(scan, read_edit_file(test::data_path("snowden_nose.json")), options, report));
+    EXPECT_EQ(t.components, expected.components);
+    EXPECT_EQ(t.euler, expected.euler);
+}
+
+TEST(KeepsTopology, FogVolumesThroughTheVoxmapWarp) {
+    // Voxmaps whose inside is 0.3, 0.6 or 1.0 (fog, CT data) through deform_voxmap, as `voxwarp warp` runs them:
+    // the 0.5 isosurface keeps its topology (a sphere; none at all for 0.3), small edit and large.
+    for (const float inside : {0.3f, 0.6f, 1.0f}) {
+        Voxmap fog({40, 40, 40}, Eigen::Vector3d::Constant(-1.0), 0.05);
+        for (std::int64_t k = 0; k < 40; ++k)
+            for (std::int64_t j = 0; j < 40; ++j)
+                for (std::int64_t i = 0; i < 40; ++i)
+                    fog.at(i, j, k) = float(inside * std::clamp(0.5 - (fog.world(double(i), double(j), double(k)).norm() - 0.6) / 0.1, 0.0, 1.0));
+        const Bounds b{Eigen::Vector3d::Constant(-0.6), Eigen::Vector3d::Constant(0.6)};
+        for (const double voxels : {0.5, 4.0}) {
+            DeformReport report;
+            const SparseVoxmap out = deform_voxmap(to_sparse(fog), edit_of(b, 0.05, voxels), DeformOptions{}, report);
+            const TriangleMesh surface = extract(out);
+            if (inside < 0.5f) {
+                EXPECT_EQ(surface.face_count(), 0u) << inside;
+                continue;
+            }
+            const MeshTopology t = topology(surface);
+            EXPECT_TRUE(t.watertight()) << inside << ", " << voxels;
+            EXPECT_EQ(t.components, 1) << inside << ", " << voxels;
+            EXPECT_EQ(t.euler, 2) << inside << ", " << voxels;
+        }
+    }
+}
+
+} // namespace
+} // namespace voxwarp
