@@ -569,19 +569,25 @@ double flood_fill_misses(const TriangleMesh& mesh, const openvdb::FloatGrid& lev
     if (!(total > 0)) return 0;
     // Sharp edges (faces meeting at over 30 degrees): within a voxel of one, the level set's trilinear samples are
     // off by up to half a voxel (the distance field kinks there), so samples that near are left out.
-    std::map<std::pair<std::int32_t, std::int32_t>, std::vector<std::size_t>> edge_faces;
-    for (std::size_t f = 0; f < faces.size(); ++f)
-        for (int e = 0; e < 3; ++e) edge_faces[std::minmax(faces[f][std::size_t(e)], faces[f][std::size_t((e + 1) % 3)])].push_back(f);
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> edges(3 * faces.size()); // (edge key, face * 4 + edge)
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, faces.size()), [&](const auto& r) {
+        for (std::size_t f = r.begin(); f != r.end(); ++f)
+            for (std::size_t e = 0; e < 3; ++e) {
+                const auto [lo, hi] = std::minmax(faces[f][e], faces[f][(e + 1) % 3]);
+                edges[3 * f + e] = {std::uint64_t(std::uint32_t(lo)) << 32 | std::uint32_t(hi), std::uint32_t(4 * f + e)};
+            }
+    });
+    tbb::parallel_sort(edges.begin(), edges.end());
     auto normal = [&](std::size_t f) {
         const auto& t = faces[f];
         return (mesh.vertices[std::size_t(t[1])] - mesh.vertices[std::size_t(t[0])]).cross(mesh.vertices[std::size_t(t[2])] - mesh.vertices[std::size_t(t[0])]).normalized().eval();
     };
+    const double sharp_cos = std::cos(30.0 * 3.14159265358979 / 180);
     std::vector<std::uint8_t> sharp(faces.size(), 0); // per face, bit e: its edge e (vertex e to e + 1) is sharp
-    for (std::size_t f = 0; f < faces.size(); ++f)
-        for (int e = 0; e < 3; ++e) {
-            const auto& around = edge_faces[std::minmax(faces[f][std::size_t(e)], faces[f][std::size_t((e + 1) % 3)])];
-            for (const std::size_t g : around)
-                if (g != f && normal(f).dot(normal(g)) < std::cos(30.0 * 3.14159265358979 / 180)) sharp[f] |= std::uint8_t(1 << e);
+    for (std::size_t q = 0; q + 1 < edges.size(); ++q)
+        if (edges[q].first == edges[q + 1].first) {
+            const std::size_t f = edges[q].second / 4, g = edges[q + 1].second / 4;
+            if (normal(f).dot(normal(g)) < sharp_cos) sharp[f] |= std::uint8_t(1 << (edges[q].second % 4)), sharp[g] |= std::uint8_t(1 << (edges[q + 1].second % 4));
         }
     const double per_area = std::min(1.0, double(1 << 14) / total); // samples per voxel of area
     std::atomic<std::size_t> misses{0}, samples{0};
