@@ -8,6 +8,7 @@
 
 #include "thin_parts.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -68,8 +69,10 @@ constexpr double kMostSqueezePerStep = 0.5;
 int plan_steps(const WarpDomain& domain, const Edit& edit, const DeformOptions& options, ConstraintSolution& first, bool& folds_remain, int& iterations) {
     for (int steps = 1;; steps *= 2) {
         first = solve_min_norm(domain, step_constraints(edit.constraints, 0, steps), edit.preserve_volume, options.progress, iterations);
-        folds_remain = !find_folds(first.lattice).empty();
-        const bool squeezes = !find_folds(first.lattice, 4, kMostSqueezePerStep).empty();
+        // One pass finds both: regions squeezed under kMostSqueezePerStep, among them any that fold (det <= 0).
+        const auto squeezed = find_folds(first.lattice, 4, kMostSqueezePerStep);
+        folds_remain = std::any_of(squeezed.begin(), squeezed.end(), [](const Fold& f) { return f.min_determinant <= 0; });
+        const bool squeezes = !squeezed.empty();
         if ((!folds_remain && !squeezes) || steps * 2 > options.max_steps) return steps;
     }
 }

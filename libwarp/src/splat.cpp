@@ -380,7 +380,10 @@ public:
                     box.include(cell, cell);
                     Eigen::Matrix3d J;
                     J << ex, ey, ez;
-                    image_cells(centre, J, [&](const Index3& x) { carried->cells.push_back({x, inside}); });
+                    image_cells(centre, J, [&](const Index3& x) {
+                        carried->cells.push_back({x, inside});
+                        box.include(x, x); // so an incremental move resolves again the rows its old carries reached
+                    });
                 }
             }
             footprint(centre, lo, hi, preview, fp);
