@@ -12,12 +12,14 @@
 /// of the parallelepiped spanned by the map's Jacobian columns (per voxel step), each overlap scaled by
 /// |det| / box volume (the paper's box of six face centres loses a quarter of the density under a 30 degree
 /// rotation; this one deposits each voxel's image volume exactly and equals the paper's box for translations
-/// and axis scalings). Finally density = wv / weight where weight >= 1; where weight < 1 the paper's wv,
-/// plus the uncovered part filled with material when the voxel lies inside (wv >= weight / 2): the paper
-/// treats uncovered space as empty, which is right at the data's edge but leaves dips inside the solid. Only
-/// the narrow band within 2 voxels of a fractional density is splatted; target voxels no splat reaches take
-/// the side (inside or outside) of the last reached voxel along their x row, which is what the skipped voxels
-/// would have given them. Weights are accumulated in 32-bit fixed point (2^-22), so sums do not depend on order:
+/// and axis scalings). Finally density = wv / weight for any weight: the uncovered part of a voxel takes the
+/// covered part's mean (the paper keeps wv where weight < 1, treating uncovered space as empty, which leaves
+/// dips inside the solid and lowers a fog volume's inside). Only the narrow band within 2 voxels of a
+/// fractional density is splatted; target voxels no splat reaches take the side (inside or outside) of the last
+/// reached voxel along their x row, which is what the skipped voxels would have given them. Parts of either side
+/// thinner than three voxels (a scan's one-voxel walls, a gap one voxel wide) are also carried: the cells their
+/// voxels' image boxes hold are put back on their side where the box filter left them on the other, so a warp
+/// keeps them closed (src/resolve.h says how). Weights are accumulated in 32-bit fixed point (2^-22), so sums do not depend on order:
 /// the result is the same for any thread count, and an incremental update (subtract a region's old
 /// contribution, add its new one) is bit-identical to a full recompute.
 #pragma once
