@@ -262,7 +262,7 @@ public:
                         const Eigen::Vector3d ex = combine(bx.slope, q), ey = combine(bx.value, qy), ez = combine(bx.value, qz);
                         const VoxelImage image = voxel_image(centre, ex, ey, ez);
                         const std::int64_t vx = e - domain_.offset[0];
-                        visit(centre, image.lo, image.hi, density_at(vx), image.mass, std::uint32_t((e - e0) + gx * (m + gy * l)), ex, ey, ez);
+                        visit(centre, image.lo, image.hi, density_at(vx), image.mass, std::uint64_t(e - e0) + std::uint64_t(gx) * (std::uint64_t(m) + std::uint64_t(gy) * std::uint64_t(l)), ex, ey, ez);
                     }
                 }
             }
@@ -368,7 +368,7 @@ public:
         const std::uint64_t gx = std::uint64_t(domain_.granularity[0]), gy = std::uint64_t(domain_.granularity[1]), gz = std::uint64_t(domain_.granularity[2]);
         const std::array<std::uint64_t, 3> dims{std::uint64_t(domain_.dims[0]), std::uint64_t(domain_.dims[1]), std::uint64_t(domain_.dims[2])};
         for_each_box(lattice, a, b, c, [&](const Eigen::Vector3d& centre, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, float density, double mass,
-                                           std::uint32_t local, const Eigen::Vector3d& ex, const Eigen::Vector3d& ey, const Eigen::Vector3d& ez) {
+                                           std::uint64_t local, const Eigen::Vector3d& ex, const Eigen::Vector3d& ey, const Eigen::Vector3d& ez) {
             if (carried && next_thin != thin.end()) { // both in visiting order: a merge
                 while (next_thin != thin.end() && *next_thin < local) ++next_thin;
                 if (next_thin != thin.end() && *next_thin == local) {
@@ -600,7 +600,7 @@ private:
                                g = std::int64_t(v / std::uint64_t(n[0] * n[1])) + domain_.offset[2];
             if (e < 0 || f < 0 || g < 0 || e >= domain_.dims[0] || f >= domain_.dims[1] || g >= domain_.dims[2]) continue;
             const int a = int(e / gx), b = int(f / gy), c = int(g / gz);
-            thin_[region_index(a, b, c)].push_back(std::uint32_t((e - std::int64_t(a) * gx) + gx * ((f - std::int64_t(b) * gy) + gy * (g - std::int64_t(c) * gz))));
+            thin_[region_index(a, b, c)].push_back(std::uint64_t((e - std::int64_t(a) * gx) + gx * ((f - std::int64_t(b) * gy) + gy * (g - std::int64_t(c) * gz))));
         }
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, thin_.size()), [&](const auto& r) {
             for (std::size_t q = r.begin(); q != r.end(); ++q) std::sort(thin_[q].begin(), thin_[q].end());
@@ -630,7 +630,7 @@ private:
     std::array<std::int64_t, 3> near_dims_{};
     std::vector<std::uint64_t> run_offsets_; // per near-grid row (j + ny k), into runs_
     std::vector<Run> runs_;
-    std::vector<std::vector<std::uint32_t>> thin_; // per region
+    std::vector<std::vector<std::uint64_t>> thin_; // per region
 };
 
 } // namespace warp_internal
