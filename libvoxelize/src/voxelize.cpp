@@ -592,8 +592,8 @@ double flood_fill_misses(const TriangleMesh& mesh, const openvdb::FloatGrid& lev
     const double per_area = std::min(1.0, double(1 << 14) / total); // samples per voxel of area
     std::atomic<std::size_t> misses{0}, samples{0};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, faces.size(), 256), [&](const auto& r) {
-        const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> phi(level_set.getConstAccessor(),
-                                                                                                              level_set.transform());
+        const auto accessor = level_set.getConstAccessor(); // the sampler keeps a reference to it
+        const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> phi(accessor, level_set.transform());
         auto at = [&](const Eigen::Vector3d& p) { return phi.wsSample(openvdb::Vec3d(p.x(), p.y(), p.z())); };
         std::size_t local_misses = 0, local_samples = 0;
         for (std::size_t f = r.begin(); f != r.end(); ++f) {
