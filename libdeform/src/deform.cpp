@@ -60,20 +60,13 @@ ConstraintSolution solve_min_norm(const WarpDomain& domain, const std::vector<Co
     return s;
 }
 
-/// A step may shrink volume to no less than this fraction anywhere: the warp carries a part thinner than three voxels
-/// (warp.h), and a thicker one squeezed much faster than that in one step falls below a voxel before it is carried.
-constexpr double kMostSqueezePerStep = 0.5;
-
 /// Solve one min-norm edit on `domain`, splitting it into as many steps (up to max_steps) as keep the map
 /// injective. Returns the step count; the solution is that of the first step.
 int plan_steps(const WarpDomain& domain, const Edit& edit, const DeformOptions& options, ConstraintSolution& first, bool& folds_remain, int& iterations) {
     for (int steps = 1;; steps *= 2) {
         first = solve_min_norm(domain, step_constraints(edit.constraints, 0, steps), edit.preserve_volume, options.progress, iterations);
-        // One pass finds both: regions squeezed under kMostSqueezePerStep, among them any that fold (det <= 0).
-        const auto squeezed = find_folds(first.lattice, 4, kMostSqueezePerStep);
-        folds_remain = std::any_of(squeezed.begin(), squeezed.end(), [](const Fold& f) { return f.min_determinant <= 0; });
-        const bool squeezes = !squeezed.empty();
-        if ((!folds_remain && !squeezes) || steps * 2 > options.max_steps) return steps;
+        folds_remain = !find_folds(first.lattice).empty();
+        if (!folds_remain || steps * 2 > options.max_steps) return steps;
     }
 }
 
