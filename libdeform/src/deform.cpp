@@ -8,7 +8,6 @@
 
 #include "thin_parts.h"
 
-#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
