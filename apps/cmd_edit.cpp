@@ -84,7 +84,8 @@ public:
         try {
             DeformReport report;
             const auto start = std::chrono::steady_clock::now();
-            const TriangleMesh out = session_.deform(script, resolution, report, progress);
+            // Drag previews (below the full resolution) are shown for a moment: they skip snapping, the result does not.
+            const TriangleMesh out = session_.deform(script, resolution, report, progress, resolution >= args_.resolution);
             report.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             send_mesh(response, out);
             // One line of JSON: a header holds it.

@@ -329,14 +329,15 @@ void define_module(py::module_& m) {
     m.def(
         "deform",
         [](const py::handle& V, const py::handle& F, const py::handle& edit, int resolution, const py::object& voxel_size, const std::string& mode, bool preview,
-           int max_steps, std::size_t faces, const std::string& mesher, const std::string& sign, const py::object& max_memory, const py::object& progress) {
+           int max_steps, std::size_t faces, const std::string& mesher, const std::string& sign, bool snap, const py::object& max_memory,
+           const py::object& progress) {
             const TriangleMesh mesh = mesh_from_arrays(V, F);
             const EditScript script = edit_from(edit);
             if (mode != "volume" && mode != "vertex") throw InvalidInput("mode: expected \"volume\" or \"vertex\", got \"" + mode + "\"");
             if (max_steps < 1 || max_steps > 64) throw InvalidInput("max_steps: " + std::to_string(max_steps) + " is outside [1, 64]");
             DeformOptions o;
             o.voxelize = voxelize_options(resolution, voxel_size, 3, sign, max_memory);
-            o.preview = preview, o.max_steps = max_steps, o.target_faces = faces;
+            o.preview = preview, o.max_steps = max_steps, o.target_faces = faces, o.snap = snap;
             o.extract.mesher = parse_mesher(mesher);
             LongCall call(progress);
             o.progress = call.progress();
@@ -348,9 +349,10 @@ void define_module(py::module_& m) {
             return py::make_tuple(arrays[0], arrays[1], report_dict(report));
         },
         py::arg("V"), py::arg("F"), py::arg("edit"), py::kw_only(), py::arg("resolution") = 128, py::arg("voxel_size") = py::none(), py::arg("mode") = "volume",
-        py::arg("preview") = false, py::arg("max_steps") = 8, py::arg("faces") = 0, py::arg("mesher") = "mc", py::arg("sign") = "auto", py::arg("max_memory") = py::none(),
-        py::arg("progress") = py::none(),
-        "Deform a mesh by an edit script (dict or path): voxelize, warp, re-polygonize. Returns (V, F, report).");
+        py::arg("preview") = false, py::arg("max_steps") = 8, py::arg("faces") = 0, py::arg("mesher") = "mc", py::arg("sign") = "auto", py::arg("snap") = true,
+        py::arg("max_memory") = py::none(), py::arg("progress") = py::none(),
+        "Deform a mesh by an edit script (dict or path): voxelize, warp, re-polygonize, and (snap=True) move each output vertex onto\n"
+        "the exact image of its source point on the input. Returns (V, F, report).");
     m.def(
         "set_threads",
         [](int threads) {

@@ -1,6 +1,8 @@
 // The command line as a user meets it: exit codes, one-line messages naming the file, no half-written output.
 #include "test_helpers.h"
 
+#include <voxwarp/mesh_io.h>
+
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -105,6 +107,21 @@ TEST_F(Cli, DeformWritesMeshAndReport) {
     EXPECT_NE(text.str().find("\"residual_voxels\""), std::string::npos);
     EXPECT_NE(text.str().find("\"volume_before\""), std::string::npos);
     EXPECT_NE(text.str().find("\"peak_resident_bytes\""), std::string::npos);
+    EXPECT_NE(text.str().find("\"snap\": true"), std::string::npos);
+    // --no-snap: the vertices extraction gives, and the report says so.
+    const Outcome plain = run("deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -o " + file("plain.ply") +
+                              " -r 64 --no-snap --report " + file("plain.json") + " -q");
+    EXPECT_EQ(plain.code, 0) << plain.err;
+    std::ifstream plain_in(file("plain.json"));
+    std::stringstream plain_text;
+    plain_text << plain_in.rdbuf();
+    EXPECT_NE(plain_text.str().find("\"snap\": false"), std::string::npos);
+    EXPECT_NE(plain_text.str().find("\"snapped_vertices\": 0"), std::string::npos);
+    const TriangleMesh snapped = read_mesh(file("ear.ply")), extracted = read_mesh(file("plain.ply"));
+    ASSERT_EQ(snapped.vertices.size(), extracted.vertices.size());
+    double moved = 0;
+    for (std::size_t v = 0; v < snapped.vertices.size(); ++v) moved = std::max(moved, (snapped.vertices[v] - extracted.vertices[v]).norm());
+    EXPECT_GT(moved, 0.0);
 }
 
 // Every class of bad input, through the command line: exit code 2, one line naming the file, no output.

@@ -4,6 +4,7 @@
 #include <voxwarp/foldover.h>
 #include <voxwarp/resources.h>
 #include <voxwarp/rigid.h>
+#include <voxwarp/snap.h>
 #include <voxwarp/surface_distance.h>
 
 #include "thin_parts.h"
@@ -185,7 +186,7 @@ void measure_targets(EditReport& er, const std::vector<Constraint>& constraints,
 /// The edits of deform_voxmap; `model` (the input mesh, or null) tells how far the first edit's points lie from it.
 /// `probe`, when given, goes with the space through every step and is checked after each edit.
 SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report, const TriangleMesh* model,
-                       FeatureSurface* features = nullptr, SurfaceProbe* probe = nullptr) {
+                       FeatureSurface* features = nullptr, SurfaceProbe* probe = nullptr, std::vector<WarpStep>* steps = nullptr) {
     Progress progress(options.progress, "deform");
     report.voxel_size = voxmap.voxel_size();
     report.dims = voxmap.dims();
@@ -242,6 +243,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
                            (er.steps > 1 ? " step " + std::to_string(s + 1) + "/" + std::to_string(er.steps) : ""));
             if (features) push_feature_surface(domain.lattice, solution.lattice, *features); // the sharp parts go with the space
             if (probe) probe->push(domain.lattice, solution.lattice, int(e));
+            if (steps) steps->push_back({domain.lattice, solution.lattice});
             voxmap = warp(std::move(domain), solution.lattice, {.preview = options.preview, .progress = options.progress});
             report.seconds_warp += seconds_since(t);
             progress.report(double(s + 1) / er.steps);
@@ -280,7 +282,8 @@ SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions
     return voxelize_sparse(mesh, vo);
 }
 
-TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report) {
+TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report,
+                              const SourceSurface* surface = nullptr) {
     report.mode = "volume";
     // The feature mesher's Hermite data: the input around its sharp edges, carried through every warp.
     FeatureSurface features;
@@ -289,13 +292,24 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     // Surface the voxmap loses, on voxelizing and in each edit.
     SurfaceProbe probe(mesh, voxmap.voxel_size());
     probe.check(voxmap, SurfaceProbe::kVoxelize);
-    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh, sharpen && !features.empty() ? &features : nullptr, &probe);
+    std::vector<WarpStep> steps;
+    voxmap = run_edits(std::move(voxmap), script, options, report, &mesh, sharpen && !features.empty() ? &features : nullptr, &probe, &steps);
     report.thin_parts = probe.parts(options.voxelize.voxel_size > 0 ? bounds(mesh).size().maxCoeff() : options.voxelize.resolution * report.voxel_size);
     auto t = Clock::now();
     ExtractOptions eo = options.extract;
     eo.progress = options.progress;
     if (sharpen && !features.empty()) eo.feature_surface = &features;
     TriangleMesh out = extract(voxmap, eo);
+    if (options.snap && out.face_count() > 0) {
+        const auto ts = Clock::now();
+        const SnapOptions so{.voxel_size = voxmap.voxel_size()};
+        const auto sources = surface ? find_sources(out, *surface, steps, so) : find_sources(out, mesh, steps, so);
+        const SnapReport sr = snap_to_sources(out, mesh, steps, sources, so);
+        report.snap = true;
+        report.snapped_vertices = sr.snapped;
+        report.unsnapped_vertices = sr.unsnapped;
+        report.seconds_snap = seconds_since(ts);
+    }
     if (options.target_faces > 0) out = decimate(out, options.target_faces);
     report.seconds_extract = seconds_since(t);
     if (out.face_count() == 0) {

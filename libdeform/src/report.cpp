@@ -36,10 +36,16 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
     j["volume_after"] = r.volume_after;
     j["volume_change_percent"] = change_percent(r.volume_before, r.volume_after);
     j["seconds"] = {{"total", r.seconds_total}, {"read", r.seconds_read},       {"voxelize", r.seconds_voxelize}, {"solve", r.seconds_solve},
-                    {"warp", r.seconds_warp},   {"extract", r.seconds_extract}, {"write", r.seconds_write}};
+                    {"warp", r.seconds_warp},   {"extract", r.seconds_extract}, {"snap", r.seconds_snap},
+                    {"write", r.seconds_write}};
     j["peak_resident_bytes"] = peak_resident_bytes();
     j["output_vertices"] = r.output_vertices;
     j["output_faces"] = r.output_faces;
+    if (r.mode == "volume") {
+        j["snap"] = r.snap;
+        j["snapped_vertices"] = r.snapped_vertices;
+        j["unsnapped_vertices"] = r.unsnapped_vertices;
+    }
     j["edits"] = nlohmann::json::array();
     for (const auto& e : r.edits) {
         nlohmann::json je;

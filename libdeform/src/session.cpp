@@ -8,7 +8,8 @@ namespace voxwarp {
 
 namespace deform_internal {
 SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report = nullptr);
-TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report);
+TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report,
+                              const SourceSurface* surface = nullptr);
 } // namespace deform_internal
 
 DeformSession::DeformSession(TriangleMesh mesh, DeformOptions options) : mesh_(std::move(mesh)), options_(std::move(options)) { check_mesh(mesh_, "mesh"); }
@@ -19,8 +20,9 @@ double DeformSession::voxel_size(int resolution) const {
     return voxelize_frame(mesh_, vo).voxel_size;
 }
 
-TriangleMesh DeformSession::deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress) {
+TriangleMesh DeformSession::deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress, bool snap) {
     DeformOptions o = options_;
+    o.snap = o.snap && snap;
     if (resolution > 0) o.voxelize.resolution = resolution, o.voxelize.voxel_size = 0;
     const int key = resolution > 0 ? resolution : 0;
     o.progress = progress;
@@ -34,7 +36,8 @@ TriangleMesh DeformSession::deform(const EditScript& script, int resolution, Def
     recent_.erase(std::remove(recent_.begin(), recent_.end(), key), recent_.end());
     recent_.push_back(key);
     while (recent_.size() > 2) voxmaps_.erase(recent_.front()), recent_.erase(recent_.begin());
-    return deform_internal::deform_voxelized(mesh_, *it->second, script, o, report);
+    if (o.snap && !surface_) surface_ = std::make_unique<SourceSurface>(mesh_);
+    return deform_internal::deform_voxelized(mesh_, *it->second, script, o, report, surface_.get());
 }
 
 } // namespace voxwarp

@@ -153,6 +153,12 @@ def test_deform_reports_like_the_cli():
     moves = [c for c in report["edits"][0]["constraints"] if c["kind"] == "move"]
     assert moves and all(c["surface_miss_voxels"] is not None for c in moves)
     assert report["output_faces"] == len(F2) and report["output_vertices"] == len(V2)
+    assert report["snap"] and report["snapped_vertices"] + report["unsnapped_vertices"] == len(V2)
+    # snap=False: the same connectivity, vertices where extraction put them.
+    V3, F3, plain = voxwarp.deform(V, F, data("box_twist.json"), resolution=48, snap=False)
+    assert not plain["snap"] and plain["snapped_vertices"] == 0
+    assert np.array_equal(F2, F3) and not np.array_equal(V2, V3)
+    assert np.abs(V2 - V3).max() <= 0.5 * report["voxel_size"] * (1 + 1e-9)
 
 
 def _turned_box():

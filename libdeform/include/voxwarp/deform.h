@@ -21,6 +21,9 @@ struct DeformOptions {
     ExtractOptions extract;
     bool preview = false;          ///< map-and-round warp (fast, aliased)
     std::size_t target_faces = 0;  ///< > 0: decimate the extracted mesh to about this many faces (CGAL edge collapse)
+    /// Move each output vertex onto the exact image of its source point on the input (snap.h), where that moves it
+    /// at most half a voxel and flips no face. Mesh input, volume mode only.
+    bool snap = true;
     int max_steps = 8;             ///< most steps a min-norm edit may be split into to avoid folding the lattice map
     double far_fraction = 0.25;    ///< constraint points farther than this fraction of the model's size from its box are refused
     ProgressCallback progress;     ///< optional progress / cancel (every stage)
@@ -84,6 +87,9 @@ struct DeformReport {
     double seconds_voxelize = 0, seconds_solve = 0, seconds_warp = 0, seconds_extract = 0;
     double seconds_read = 0, seconds_write = 0, seconds_total = 0; ///< filled by callers that read and write files
     std::size_t output_vertices = 0, output_faces = 0;
+    bool snap = false;                ///< whether output vertices were snapped onto the exact warped input
+    std::size_t snapped_vertices = 0, unsnapped_vertices = 0; ///< with snap: vertices moved, and left as extracted
+    double seconds_snap = 0;          ///< finding source points and snapping (part of seconds_extract)
     std::vector<ThinPart> thin_parts; ///< what the voxmap lost (mesh input, volume mode), largest first, at most 16
 };
 

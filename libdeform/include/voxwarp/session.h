@@ -1,12 +1,14 @@
 /// @file session.h
 /// @brief A deform in progress, for interactive front ends (the editor's server): the input mesh voxelized once
-///        per resolution and kept, so each new edit script costs a solve, a warp and an extraction only.
+///        per resolution and kept (and indexed once for snapping), so each new edit script costs a solve, a warp, an
+///        extraction and a snap only.
 ///
 /// Frames and the report as in deform.h. Not thread-safe: callers serialise deform() (the server runs one
 /// request at a time and cancels the older one through its progress callback).
 #pragma once
 
 #include <voxwarp/deform.h>
+#include <voxwarp/snap.h>
 
 #include <map>
 #include <memory>
@@ -18,11 +20,15 @@ public:
     /// `options` as for deform_mesh; options.voxelize.resolution is the default resolution.
     /// @throw InvalidInput when the mesh is unusable (check_mesh).
     DeformSession(TriangleMesh mesh, DeformOptions options);
+    // The index of the input for snapping refers to the session's own mesh: a session stays where it was made.
+    DeformSession(const DeformSession&) = delete;
+    DeformSession& operator=(const DeformSession&) = delete;
 
     /// deform_mesh(mesh(), script, options at `resolution`) with the voxelization of that resolution reused
     /// (made on first use; the two most recent resolutions are kept). resolution 0: the default.
-    /// report.seconds_voxelize is 0 when the voxelization was reused. @throw as deform_mesh.
-    TriangleMesh deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress = {});
+    /// report.seconds_voxelize is 0 when the voxelization was reused. `snap` false skips snapping even where
+    /// options().snap asks for it (quick previews). @throw as deform_mesh.
+    TriangleMesh deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress = {}, bool snap = true);
 
     const TriangleMesh& mesh() const { return mesh_; }
     const DeformOptions& options() const { return options_; }
@@ -34,6 +40,7 @@ private:
     DeformOptions options_;
     std::map<int, std::shared_ptr<const SparseVoxmap>> voxmaps_;
     std::vector<int> recent_;
+    std::unique_ptr<SourceSurface> surface_; ///< mesh_ indexed for snapping, made on first use
 };
 
 } // namespace voxwarp

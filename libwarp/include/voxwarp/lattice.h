@@ -66,6 +66,8 @@ public:
     Eigen::Vector3d evaluate(const Eigen::Vector3d& stu) const;
     /// dB/d(s,t,u): columns are the derivatives along s, t, u (world units per parameter unit).
     Eigen::Matrix3d jacobian(const Eigen::Vector3d& stu) const;
+    /// B(s, t, u) and its Jacobian in one pass over the 64 control points (what a Newton step needs).
+    Eigen::Vector3d evaluate(const Eigen::Vector3d& stu, Eigen::Matrix3d& jacobian) const;
     /// The 64 basis weights of the control points that shape B at stu, and the region they belong to.
     /// weights[i + 4 (j + 4 k)] multiplies point(a+i, b+j, c+k).
     void weights(const Eigen::Vector3d& stu, std::array<int, 3>& region, std::array<double, 64>& weights) const;

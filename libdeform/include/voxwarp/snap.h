@@ -1,0 +1,83 @@
+/// @file snap.h
+/// @brief Where each vertex of a re-polygonized mesh came from: its source point on the input surface, found by
+///        carrying the vertex back through the warps (pullback) and taking the nearest input point whose normal
+///        agrees; and snapping the vertex onto the exact image of that point (pushforward).
+///
+/// Frames: world units throughout. The input lives in the frame before the first warp, the output in the frame after
+/// the last; a WarpStep is one warp's map, from its rest lattice's world to its moved lattice's world.
+#pragma once
+
+#include <voxwarp/lattice.h>
+#include <voxwarp/triangle_mesh.h>
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace voxwarp {
+
+/// One warp: a point p of the rest frame goes to moved.evaluate(rest.parameter_of(p)).
+struct WarpStep {
+    Lattice rest, moved;
+};
+
+/// The exact image of an input-frame point through every step, in order.
+Eigen::Vector3d push_forward(const std::vector<WarpStep>& steps, Eigen::Vector3d point);
+
+/// The input-frame point whose image is `point` (Newton's method per step, last step first), and the Jacobian of
+/// the whole map there (d output / d input). Empty where Newton does not converge (the map folds or the point lies
+/// beyond the lattice's reach).
+std::optional<Eigen::Vector3d> pull_back(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Matrix3d* jacobian = nullptr);
+
+/// A point on the input surface: a triangle of all_triangles(input) and barycentric weights of its corners.
+struct SourcePoint {
+    std::int32_t face = -1; ///< -1: no source found
+    Eigen::Vector3d barycentric = Eigen::Vector3d::Zero();
+};
+
+struct SnapOptions {
+    double voxel_size = 0;       ///< the voxmap's h, world units (> 0)
+    double max_move_voxels = 0.5; ///< a vertex whose exact image lies farther than this stays where it is
+    double reach_voxels = 2;     ///< sources are looked for this far (input frame) from the pulled-back vertex
+};
+
+/// The input surface indexed for nearest-point queries (a CGAL AABB tree over its triangles): build it once and
+/// query it for every output of the same input (the editor's session does). `input` must outlive it.
+class SourceSurface {
+public:
+    /// @throw InvalidInput when the mesh has no face with area.
+    explicit SourceSurface(const TriangleMesh& input);
+    ~SourceSurface();
+    SourceSurface(const SourceSurface&) = delete;
+    SourceSurface& operator=(const SourceSurface&) = delete;
+    const TriangleMesh& mesh() const;
+    struct Impl;
+    const Impl& impl() const { return *impl_; }
+
+private:
+    std::unique_ptr<Impl> impl_;
+};
+
+/// For each vertex of `output` (the surface after `steps`), its source point on `input`: the nearest point of the
+/// input surface to the pulled-back vertex among faces whose normal, pushed forward, agrees with the vertex's
+/// normal on the output (so that a sheet across a gap thinner than the reach is not chosen), within reach.
+/// Parallel (oneTBB). @throw InvalidInput when voxel_size is not positive.
+std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps,
+                                      const SnapOptions& options);
+/// The same, indexing `input` for this one call.
+std::vector<SourcePoint> find_sources(const TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps,
+                                      const SnapOptions& options);
+
+struct SnapReport {
+    std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point
+    std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
+};
+
+/// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
+/// max_move_voxels, or a face around it would flip (turn by more than 90 degrees or collapse). The mesh's
+/// connectivity is kept. Parallel (oneTBB).
+SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
+                           const SnapOptions& options);
+
+} // namespace voxwarp

@@ -1,0 +1,431 @@
+// Correspondence between a re-polygonized mesh and its input, and snapping onto the exact warped surface.
+//
+// Marching cubes puts a vertex where the density's linear interpolant crosses 0.5, which is the surface only to
+// within the voxmap's sampling (a tenth of a voxel on a curved bunny, more where a sharp tip is rounded off or the
+// warp's box filter smeared the ramp). The input surface and the maps are both known exactly, so the vertex can
+// ask where it came from: pull it back through the maps, take the nearest input point facing the same way, and
+// push that point forward again.
+#include <voxwarp/errors.h>
+#include <voxwarp/snap.h>
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Simple_cartesian.h>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace voxwarp {
+
+namespace snap_internal {
+
+using Kernel = CGAL::Simple_cartesian<double>;
+using Point = Kernel::Point_3;
+using Triangle = Kernel::Triangle_3;
+using Iterator = std::vector<Triangle>::const_iterator;
+using Primitive = CGAL::AABB_triangle_primitive<Kernel, Iterator>;
+using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
+using Hint = Tree::Point_and_primitive_id;
+
+/// The parameter of `world` on lattice `L` by Newton's method from `stu` (Lattice::parameter_of without its
+/// exception and its check for an undeformed lattice, a pass over the points), and the Jacobian there; `tolerance`
+/// is in world units.
+std::optional<Eigen::Vector3d> invert(const Lattice& L, const Eigen::Vector3d& world, Eigen::Vector3d stu, Eigen::Matrix3d& J, double tolerance) {
+    for (int iteration = 0; iteration < 60; ++iteration) {
+        const Eigen::Vector3d residual = L.evaluate(stu, J) - world;
+        if (residual.norm() <= tolerance) return stu;
+        Eigen::Vector3d step = J.partialPivLu().solve(residual);
+        if (!step.allFinite()) return std::nullopt;
+        const double limit = 0.5; // half a region per step keeps Newton within reach of one polynomial piece
+        if (step.cwiseAbs().maxCoeff() > limit) step *= limit / step.cwiseAbs().maxCoeff();
+        stu -= step;
+    }
+    return std::nullopt;
+}
+
+Eigen::Vector3d undeformed_parameter(const Lattice& L, const Eigen::Vector3d& world) { return (world - L.rest_origin()).cwiseQuotient(L.spacing()); }
+
+/// Pulls points back through the steps. Consecutive output vertices are neighbours (extraction walks the grid
+/// block by block), so each Newton solve starts from the previous point's answer, a step away, when that point
+/// was near: one or two evaluations instead of four or five from the undeformed guess.
+class Puller {
+public:
+    /// `near`: how close the previous point must be to start from its answer; `tolerance`: how far from the point
+    /// its pullback's image may land (world units).
+    Puller(const std::vector<WarpStep>& steps, double near, double tolerance) : steps_(steps), previous_(steps.size()), near_(near), tolerance_(tolerance) {}
+
+    std::optional<Eigen::Vector3d> operator()(Eigen::Vector3d point, Eigen::Matrix3d& jacobian) {
+        jacobian.setIdentity();
+        for (std::size_t k = steps_.size(); k-- > 0;) {
+            const WarpStep& s = steps_[k];
+            Previous& p = previous_[k];
+            const Eigen::Vector3d guess = p.valid && (point - p.world).norm() < near_ ? Eigen::Vector3d(p.stu + p.J.partialPivLu().solve(point - p.world))
+                                                                                     : undeformed_parameter(s.moved, point);
+            Eigen::Matrix3d moved;
+            const auto stu = invert(s.moved, point, guess, moved, tolerance_);
+            p.valid = bool(stu);
+            if (!stu) return std::nullopt;
+            p.world = point, p.stu = *stu, p.J = moved;
+            // d moved / d rest = (d moved / d stu) (d rest / d stu)^-1; the steps compose last-to-first on the right.
+            if (s.rest.placement() == Placement::uniform) {
+                jacobian = jacobian * moved * s.rest.spacing().cwiseInverse().asDiagonal();
+                point = s.rest.rest_origin() + stu->cwiseProduct(s.rest.spacing());
+            } else {
+                jacobian = jacobian * moved * s.rest.jacobian(*stu).inverse();
+                point = s.rest.evaluate(*stu);
+            }
+        }
+        return point;
+    }
+
+private:
+    struct Previous {
+        bool valid = false;
+        Eigen::Vector3d world, stu;
+        Eigen::Matrix3d J;
+    };
+    const std::vector<WarpStep>& steps_;
+    std::vector<Previous> previous_;
+    double near_, tolerance_;
+};
+
+/// A rest lattice's parameter of a world point: affine for the uniform placement.
+Eigen::Vector3d rest_parameter(const Lattice& rest, const Eigen::Vector3d& p) {
+    if (rest.placement() == Placement::uniform) return (p - rest.rest_origin()).cwiseQuotient(rest.spacing());
+    return rest.parameter_of(p);
+}
+
+/// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection 5.1.5), as barycentric weights.
+Eigen::Vector3d closest_barycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
+    const Eigen::Vector3d bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        const double v = d1 / (d1 - d3);
+        return {1 - v, v, 0};
+    }
+    const Eigen::Vector3d cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        const double w = d2 / (d2 - d6);
+        return {1 - w, 0, w};
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return {0, 1 - w, w};
+    }
+    const double denom = 1 / (va + vb + vc);
+    const double v = vb * denom, w = vc * denom;
+    return {1 - v - w, v, w};
+}
+
+/// Area-weighted vertex normals (unnormalized sums of face cross products), quads split along their diagonal 0-2.
+std::vector<Eigen::Vector3d> vertex_normals(const TriangleMesh& mesh) {
+    std::vector<Eigen::Vector3d> n(mesh.vertices.size(), Eigen::Vector3d::Zero());
+    const auto& V = mesh.vertices;
+    for (const auto& t : mesh.triangles) {
+        const Eigen::Vector3d c = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
+        for (auto i : t) n[std::size_t(i)] += c;
+    }
+    for (const auto& q : mesh.quads) {
+        const Eigen::Vector3d c = (V[q[2]] - V[q[0]]).cross(V[q[3]] - V[q[1]]);
+        for (auto i : q) n[std::size_t(i)] += c;
+    }
+    return n;
+}
+
+} // namespace snap_internal
+
+/// The input's triangles with unit normals, and a CGAL tree over those that have area.
+struct SourceSurface::Impl {
+    using Point = snap_internal::Point;
+    using Triangle = snap_internal::Triangle;
+    using Iterator = snap_internal::Iterator;
+    using Tree = snap_internal::Tree;
+    using Hint = snap_internal::Hint;
+    TriangleMesh storage;
+    const std::vector<std::array<std::int32_t, 3>>& faces;
+    const std::vector<Eigen::Vector3d>& V;
+    std::vector<Eigen::Vector3d> normal;
+    std::vector<Triangle> triangles;
+    std::vector<std::int32_t> face_of; ///< triangles[i] is faces[face_of[i]]
+    Tree tree;
+
+    const TriangleMesh& input;
+
+    explicit Impl(const TriangleMesh& mesh) : faces(all_triangles(mesh, storage)), V(mesh.vertices), input(mesh) {
+        normal.resize(faces.size());
+        auto point = [&](std::int32_t i) { return Point(V[std::size_t(i)].x(), V[std::size_t(i)].y(), V[std::size_t(i)].z()); };
+        for (std::size_t f = 0; f < faces.size(); ++f) {
+            const auto& t = faces[f];
+            const Eigen::Vector3d c = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
+            normal[f] = c.norm() > 0 ? Eigen::Vector3d(c.normalized()) : Eigen::Vector3d::Zero();
+            if (c.norm() > 0) {
+                triangles.emplace_back(point(t[0]), point(t[1]), point(t[2]));
+                face_of.push_back(std::int32_t(f));
+            }
+        }
+        if (triangles.empty()) throw InvalidInput("snap: the input mesh has no faces with area");
+        tree.insert(triangles.begin(), triangles.end());
+        tree.build();
+        tree.accelerate_distance_queries();
+    }
+
+    Eigen::Vector3d position(const SourcePoint& s) const {
+        const auto& t = faces[std::size_t(s.face)];
+        return s.barycentric[0] * V[t[0]] + s.barycentric[1] * V[t[1]] + s.barycentric[2] * V[t[2]];
+    }
+
+    /// The nearest point within `reach` of q on a face whose normal has a positive dot product with `n`. `hint` is
+    /// the previous query's answer, which starts the tree's search when it lies within `near` of q (and is updated).
+    SourcePoint nearest(const Eigen::Vector3d& q, const Eigen::Vector3d& n, double reach, std::optional<Hint>& hint, double near) const {
+        const Point p(q.x(), q.y(), q.z());
+        const bool close = hint && CGAL::squared_distance(p, hint->first) < near * near;
+        const auto hit = close ? tree.closest_point_and_primitive(p, *hint) : tree.closest_point_and_primitive(p);
+        hint = hit;
+        const std::int32_t f = face_of[std::size_t(hit.second - triangles.begin())];
+        const Eigen::Vector3d c(hit.first.x(), hit.first.y(), hit.first.z());
+        SourcePoint best;
+        if ((c - q).norm() > reach) return best;
+        if (normal[std::size_t(f)].dot(n) > 0) {
+            const auto& t = faces[std::size_t(f)];
+            best.face = f;
+            best.barycentric = snap_internal::closest_barycentric(q, V[t[0]], V[t[1]], V[t[2]]);
+            return best;
+        }
+        // The nearest face looks the other way (the far side of a thin wall or gap): the nearest one that agrees.
+        std::vector<Iterator> candidates;
+        const CGAL::Bbox_3 box(q.x() - reach, q.y() - reach, q.z() - reach, q.x() + reach, q.y() + reach, q.z() + reach);
+        tree.all_intersected_primitives(box, std::back_inserter(candidates));
+        double nearest = reach * reach;
+        for (const Iterator& it : candidates) {
+            const std::int32_t g = face_of[std::size_t(it - triangles.begin())];
+            if (!(normal[std::size_t(g)].dot(n) > 0)) continue;
+            const auto& t = faces[std::size_t(g)];
+            const Eigen::Vector3d b = snap_internal::closest_barycentric(q, V[t[0]], V[t[1]], V[t[2]]);
+            const double d = (b[0] * V[t[0]] + b[1] * V[t[1]] + b[2] * V[t[2]] - q).squaredNorm();
+            if (d <= nearest) nearest = d, best.face = g, best.barycentric = b;
+        }
+        return best;
+    }
+};
+
+SourceSurface::SourceSurface(const TriangleMesh& input) : impl_(std::make_unique<Impl>(input)) {}
+SourceSurface::~SourceSurface() = default;
+const TriangleMesh& SourceSurface::mesh() const { return impl_->input; }
+
+namespace snap_internal {
+
+/// Per vertex, how far the nearest other sheet of the surface is, looking no farther than `radius` (+infinity
+/// beyond): the nearest vertex whose normal looks the other way (the far side of a thin wall or gap, which the
+/// extraction may have put a hundredth of a voxel away). Snapping a vertex farther than a fraction of that could
+/// push it through the other sheet.
+///
+/// Vertices are sorted by cell of `radius` (keys z-major, then y, then x), so the three x-neighbours of a cell are
+/// one run of the sorted array, and walking the cells in order, each of the nine runs a cell needs starts at or
+/// after where the previous cell's did: nine cursors that only move forward, no hash table and no cache misses.
+std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::vector<Eigen::Vector3d>& normal, double radius) {
+    const std::size_t n = P.size();
+    const double inverse = 1 / radius;
+    constexpr std::int64_t kOffset = 1 << 20; // cells are 21-bit fields, offset to stay positive
+    auto key = [&](const Eigen::Vector3d& p) {
+        const auto bits = [&](double x) { return std::uint64_t(std::int64_t(std::floor(x * inverse)) + kOffset) & 0x1fffff; };
+        return bits(p.x()) | bits(p.y()) << 21 | bits(p.z()) << 42;
+    };
+    std::vector<std::pair<std::uint64_t, std::int32_t>> sorted(n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) sorted[v] = {key(P[v]), std::int32_t(v)};
+    });
+    tbb::parallel_sort(sorted.begin(), sorted.end());
+    std::vector<std::size_t> cells; // first index of each cell's run
+    for (std::size_t i = 0; i < n; ++i)
+        if (i == 0 || sorted[i].first != sorted[i - 1].first) cells.push_back(i);
+    cells.push_back(n);
+    std::vector<double> out(n, radius * radius);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size() - 1, 256), [&](const auto& r) {
+        std::array<std::size_t, 9> cursor{};
+        bool started = false;
+        for (std::size_t c = r.begin(); c != r.end(); ++c) {
+            const std::uint64_t k = sorted[cells[c]].first;
+            for (int d = 0; d < 9; ++d) {
+                const std::int64_t dy = d % 3 - 1, dz = d / 3 - 1;
+                const std::uint64_t lo = std::uint64_t(std::int64_t(k) - 1 + dy * (std::int64_t(1) << 21) + dz * (std::int64_t(1) << 42));
+                const std::uint64_t hi = lo + 2;
+                std::size_t& i = cursor[std::size_t(d)];
+                if (!started)
+                    i = std::size_t(std::lower_bound(sorted.begin(), sorted.end(), std::pair<std::uint64_t, std::int32_t>(lo, -1)) - sorted.begin());
+                while (i < n && sorted[i].first < lo) ++i;
+                for (std::size_t j = i; j < n && sorted[j].first <= hi; ++j) {
+                    const std::size_t w = std::size_t(sorted[j].second);
+                    for (std::size_t a = cells[c]; a < cells[c + 1]; ++a) {
+                        const std::size_t v = std::size_t(sorted[a].second);
+                        const double d2 = (P[w] - P[v]).squaredNorm();
+                        if (d2 < out[v] && normal[w].dot(normal[v]) < 0) out[v] = d2;
+                    }
+                }
+            }
+            started = true;
+        }
+    });
+    for (auto& d : out) d = d < radius * radius ? std::sqrt(d) : std::numeric_limits<double>::infinity();
+    return out;
+}
+
+void check_options(const SnapOptions& options) {
+    if (!(options.voxel_size > 0) || !std::isfinite(options.voxel_size))
+        throw InvalidInput("snap: voxel size must be positive, got " + std::to_string(options.voxel_size));
+}
+
+} // namespace snap_internal
+
+using namespace snap_internal;
+
+Eigen::Vector3d push_forward(const std::vector<WarpStep>& steps, Eigen::Vector3d point) {
+    for (const WarpStep& s : steps) point = s.moved.evaluate(rest_parameter(s.rest, point));
+    return point;
+}
+
+std::optional<Eigen::Vector3d> pull_back(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Matrix3d* jacobian) {
+    Eigen::Matrix3d J;
+    double size = 0;
+    for (const WarpStep& s : steps) size = std::max(size, s.moved.spacing().maxCoeff());
+    const auto q = Puller(steps, 0, 1e-12 * size)(point, J);
+    if (jacobian) *jacobian = J;
+    return q;
+}
+
+std::vector<SourcePoint> find_sources(const TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps,
+                                      const SnapOptions& options) {
+    check_options(options);
+    return find_sources(output, SourceSurface(input), steps, options);
+}
+
+std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps,
+                                      const SnapOptions& options) {
+    check_options(options);
+    const SourceSurface::Impl& surface = input.impl();
+    const std::vector<Eigen::Vector3d> normals = vertex_normals(output);
+    const double reach = options.reach_voxels * options.voxel_size;
+    std::vector<SourcePoint> out(output.vertices.size());
+    const double near = 4 * options.voxel_size;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 512), [&](const auto& r) {
+        Puller pull(steps, near, 1e-5 * options.voxel_size); // a hundred-thousandth of a voxel is exact for a mesh
+        std::optional<Hint> hint;
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            if (normals[v].squaredNorm() == 0) continue; // in no face
+            Eigen::Matrix3d J;
+            const auto q = pull(output.vertices[v], J);
+            if (!q) continue;
+            // Normals go back with the transpose of the map's Jacobian (they are covectors).
+            out[v] = surface.nearest(*q, J.transpose() * normals[v], reach, hint, near);
+        }
+    });
+    return out;
+}
+
+SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
+                           const SnapOptions& options) {
+    check_options(options);
+    if (sources.size() != output.vertices.size())
+        throw InvalidInput("snap: " + std::to_string(sources.size()) + " source points for " + std::to_string(output.vertices.size()) + " vertices");
+    TriangleMesh storage;
+    const auto& faces = all_triangles(input, storage);
+    const auto& V = input.vertices;
+    const std::size_t n = output.vertices.size();
+    const double max_move = options.max_move_voxels * options.voxel_size;
+    std::vector<Eigen::Vector3d> target(n);
+    std::vector<char> snapped(n, 0), in_face(n, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 512), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            const SourcePoint& s = sources[v];
+            if (s.face < 0 || std::size_t(s.face) >= faces.size()) continue;
+            const auto& t = faces[std::size_t(s.face)];
+            target[v] = push_forward(steps, s.barycentric[0] * V[t[0]] + s.barycentric[1] * V[t[1]] + s.barycentric[2] * V[t[2]]);
+            snapped[v] = target[v].allFinite() && (target[v] - output.vertices[v]).norm() <= max_move;
+        }
+    });
+
+    // The faces to check, as triangles: quads by all four corner triangles, so neither diagonal may fold.
+    std::vector<std::array<std::int32_t, 3>> corners;
+    if (!output.quads.empty()) {
+        corners = output.triangles;
+        for (const auto& q : output.quads)
+            for (int c = 0; c < 4; ++c) corners.push_back({q[std::size_t((c + 3) % 4)], q[std::size_t(c)], q[std::size_t((c + 1) % 4)]});
+    }
+    const auto& checks = output.quads.empty() ? output.triangles : corners;
+    for (const auto& t : checks)
+        for (auto i : t) in_face[std::size_t(i)] = 1;
+    const auto& P = output.vertices;
+    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return snapped[std::size_t(i)] ? target[std::size_t(i)] : P[std::size_t(i)]; };
+    const double tiny = 1e-4 * options.voxel_size * options.voxel_size;
+    const std::vector<Eigen::Vector3d> normal = vertex_normals(output); // as extracted
+    {
+        // Move at most a third of the way from any corner of a face around the vertex to the other sheet (a face
+        // turns with its vertex, and its other sheet's faces may come a third of the way back).
+        const std::vector<double> own = clearance(P, normal, 1.5 * options.voxel_size);
+        std::vector<double> room = own;
+        for (const auto& t : checks) {
+            const double least = std::min({own[std::size_t(t[0])], own[std::size_t(t[1])], own[std::size_t(t[2])]});
+            for (auto i : t) room[std::size_t(i)] = std::min(room[std::size_t(i)], least);
+        }
+        for (std::size_t v = 0; v < n; ++v)
+            if (snapped[v] && (target[v] - P[v]).norm() > room[v] / 3) snapped[v] = 0;
+    }
+    // A triangle fails when a snapped corner turns it by more than 90 degrees, collapses it, or turns it away from
+    // the surface's normal as extracted at a corner (a fold with its neighbours, which need not flip it).
+    auto fails = [&](const std::array<std::int32_t, 3>& t) {
+        if (!snapped[std::size_t(t[0])] && !snapped[std::size_t(t[1])] && !snapped[std::size_t(t[2])]) return false;
+        const Eigen::Vector3d before = (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]]);
+        const Eigen::Vector3d after = (at(t[1]) - at(t[0])).cross(at(t[2]) - at(t[0]));
+        if (before.norm() == 0) return false; // a face that had no area has no side to flip to
+        if (after.dot(before) <= 0 || (after.norm() < tiny && after.norm() < 0.1 * before.norm())) return true;
+        for (auto i : t)
+            if (after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0) return true;
+        return false;
+    };
+    // Put back the snapped corners of every face that fails, until none does (each pass puts back at least one
+    // vertex, and a face with no snapped corner cannot fail). Failures are rare: a few passes over the faces.
+    for (;;) {
+        std::vector<std::int32_t> put_back = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::int32_t>(),
+            [&](const auto& r, std::vector<std::int32_t> found) {
+                for (std::size_t f = r.begin(); f != r.end(); ++f)
+                    if (fails(checks[f]))
+                        for (auto i : checks[f])
+                            if (snapped[std::size_t(i)]) found.push_back(i);
+                return found;
+            },
+            [](std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
+                a.insert(a.end(), b.begin(), b.end());
+                return a;
+            });
+        if (put_back.empty()) break;
+        for (auto i : put_back) snapped[std::size_t(i)] = 0;
+    }
+    SnapReport report;
+    for (std::size_t v = 0; v < n; ++v) {
+        if (snapped[v]) {
+            output.vertices[v] = target[v];
+            ++report.snapped;
+        } else if (in_face[v]) {
+            ++report.unsnapped;
+        }
+    }
+    return report;
+}
+
+} // namespace voxwarp

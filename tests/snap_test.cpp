@@ -1,0 +1,272 @@
+// Every output vertex knows its source point on the input: pullback inverts pushforward, snapped vertices lie on
+// the exact (analytic or exactly warped) surface, faces follow its normals, and snapping never folds the mesh
+// into itself, also on a scan whose extracted sheets come within a hundredth of a voxel of each other.
+#include "test_helpers.h"
+
+#include <voxwarp/deform.h>
+#include <voxwarp/extract.h>
+#include <voxwarp/mesh_io.h>
+#include <voxwarp/snap.h>
+#include <voxwarp/surface_distance.h>
+#include <voxwarp/warp.h>
+
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/AABB_triangle_primitive.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_mesh_processing/polygon_soup_to_polygon_mesh.h>
+#include <CGAL/Polygon_mesh_processing/self_intersections.h>
+#include <CGAL/Simple_cartesian.h>
+#include <CGAL/Surface_mesh.h>
+
+#include <gtest/gtest.h>
+
+#include <map>
+#include <random>
+
+namespace voxwarp {
+namespace {
+
+bool self_intersects(const TriangleMesh& m) {
+    using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+    std::vector<K::Point_3> points;
+    for (const auto& v : m.vertices) points.emplace_back(v.x(), v.y(), v.z());
+    std::vector<std::vector<std::size_t>> faces;
+    for (const auto& t : m.triangles) faces.push_back({std::size_t(t[0]), std::size_t(t[1]), std::size_t(t[2])});
+    CGAL::Surface_mesh<K::Point_3> mesh;
+    CGAL::Polygon_mesh_processing::polygon_soup_to_polygon_mesh(points, faces, mesh);
+    return CGAL::Polygon_mesh_processing::does_self_intersect(mesh);
+}
+
+/// A lattice over [-2, 2]^3 bent smoothly by `amount` (world units) of sine displacement.
+WarpStep bent_step(double amount) {
+    WarpStep s{Lattice::uniform({8, 8, 8}, Eigen::Vector3d::Constant(-2), Eigen::Vector3d::Constant(4.0 / 5)), {}};
+    s.moved = s.rest;
+    for (auto& p : s.moved.points()) p += amount * Eigen::Vector3d(std::sin(1.3 * p.y()), std::cos(0.7 * p.z()), std::sin(0.9 * p.x() + 0.4));
+    return s;
+}
+
+TEST(Lattice, EvaluateWithJacobianMatchesBothApart) {
+    const Lattice l = bent_step(0.3).moved;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(0, 5);
+    for (int n = 0; n < 200; ++n) {
+        const Eigen::Vector3d stu(u(rng), u(rng), u(rng));
+        Eigen::Matrix3d J;
+        const Eigen::Vector3d p = l.evaluate(stu, J);
+        EXPECT_NEAR((p - l.evaluate(stu)).norm(), 0.0, 1e-12);
+        EXPECT_NEAR((J - l.jacobian(stu)).norm(), 0.0, 1e-12);
+    }
+}
+
+TEST(Snap, PullBackInvertsPushForwardAndGivesItsJacobian) {
+    const std::vector<WarpStep> steps = {bent_step(0.2), bent_step(-0.15)};
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1, 1);
+    for (int n = 0; n < 200; ++n) {
+        const Eigen::Vector3d p(u(rng), u(rng), u(rng));
+        const Eigen::Vector3d q = push_forward(steps, p);
+        Eigen::Matrix3d J;
+        const auto back = pull_back(steps, q, &J);
+        ASSERT_TRUE(back.has_value());
+        EXPECT_NEAR((*back - p).norm(), 0.0, 1e-9);
+        for (int a = 0; a < 3; ++a) { // central differences of the forward map
+            const Eigen::Vector3d e = 1e-6 * Eigen::Vector3d::Unit(a);
+            const Eigen::Vector3d column = (push_forward(steps, p + e) - push_forward(steps, p - e)) / 2e-6;
+            EXPECT_NEAR((J.col(a) - column).norm(), 0.0, 1e-6 * column.norm());
+        }
+    }
+}
+
+/// Angles in degrees between each face's normal and `exact(centroid)`, sorted.
+std::vector<double> normal_errors(const TriangleMesh& m, const std::function<Eigen::Vector3d(const Eigen::Vector3d&)>& exact) {
+    std::vector<double> out;
+    for (const auto& t : m.triangles) {
+        const Eigen::Vector3d n = (m.vertices[std::size_t(t[1])] - m.vertices[std::size_t(t[0])]).cross(m.vertices[std::size_t(t[2])] - m.vertices[std::size_t(t[0])]);
+        if (n.norm() == 0) continue;
+        const Eigen::Vector3d c = (m.vertices[std::size_t(t[0])] + m.vertices[std::size_t(t[1])] + m.vertices[std::size_t(t[2])]) / 3;
+        out.push_back(std::acos(std::clamp(n.normalized().dot(exact(c)), -1.0, 1.0)) * 180 / M_PI);
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+TEST(Snap, RoundTripOfATurnedBoxPutsVerticesOnItsFaces) {
+    // A box turned off the grid's axes: marching cubes puts vertices off its planes (the density ramp is linear only
+    // across a flat face, and the box's edges round it off); snapped vertices lie on the planes, so faces away from
+    // the edges take the planes' normals.
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+    TriangleMesh box = test::box_mesh({-1, -0.6, -0.4}, {1, 0.6, 0.4}, 4);
+    for (auto& v : box.vertices) v = R * v;
+    const Eigen::Vector3d half(1, 0.6, 0.4);
+    auto distance = [&](const Eigen::Vector3d& p) {
+        const Eigen::Vector3d q = (R.transpose() * p).cwiseAbs() - half;
+        return std::abs(q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0));
+    };
+    auto face_normal = [&](const Eigen::Vector3d& p) { // the normal of the nearest face's plane
+        const Eigen::Vector3d q = R.transpose() * p;
+        int axis = 0;
+        for (int a = 1; a < 3; ++a)
+            if (half[a] - std::abs(q[a]) < half[axis] - std::abs(q[axis])) axis = a;
+        return Eigen::Vector3d(R * (std::copysign(1.0, q[axis]) * Eigen::Vector3d::Unit(axis)));
+    };
+    DeformOptions options;
+    options.voxelize.resolution = 48;
+    DeformReport snapped_report, plain_report;
+    const TriangleMesh snapped = deform_mesh(box, {}, options, snapped_report);
+    options.snap = false;
+    const TriangleMesh plain = deform_mesh(box, {}, options, plain_report);
+    const double h = snapped_report.voxel_size;
+    ASSERT_EQ(snapped.vertices.size(), plain.vertices.size()); // same connectivity: only positions move
+    EXPECT_TRUE(snapped_report.snap);
+    EXPECT_FALSE(plain_report.snap);
+    EXPECT_EQ(snapped_report.snapped_vertices + snapped_report.unsnapped_vertices, snapped.vertices.size());
+    EXPECT_GE(double(snapped_report.snapped_vertices), 0.95 * double(snapped.vertices.size()));
+    double plain_worst = 0;
+    std::size_t on_box = 0;
+    for (std::size_t v = 0; v < snapped.vertices.size(); ++v) {
+        plain_worst = std::max(plain_worst, distance(plain.vertices[v]) / h);
+        on_box += distance(snapped.vertices[v]) < 1e-9 * h;
+        EXPECT_LE((snapped.vertices[v] - plain.vertices[v]).norm(), 0.5 * h + 1e-12); // never more than half a voxel
+    }
+    EXPECT_EQ(on_box, snapped_report.snapped_vertices);
+    EXPECT_GT(plain_worst, 0.05); // what snapping cures
+    const auto errors = normal_errors(snapped, face_normal), before = normal_errors(plain, face_normal);
+    std::printf("turned box at 48: face normals median %.3f p90 %.3f degrees (unsnapped %.3f, %.3f)\n", errors[errors.size() / 2],
+                errors[errors.size() * 9 / 10], before[before.size() / 2], before[before.size() * 9 / 10]);
+    EXPECT_LE(errors[errors.size() / 2], 0.3);
+    EXPECT_LE(errors[errors.size() * 9 / 10], 1.0);
+    EXPECT_TRUE(topology(snapped).watertight());
+    EXPECT_FALSE(self_intersects(snapped));
+}
+
+TEST(Snap, AffineWarpPutsVerticesOnTheExactImage) {
+    // A uniform cubic B-spline lattice whose control points are moved by an affine map is that map: the exact warp
+    // of the input polyhedron is known in closed form, and the snapped vertices must lie on it.
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 3); // a polyhedron: its faces, not the sphere, are exact
+    VoxelizeOptions vo;
+    vo.resolution = 40;
+    WarpDomain domain = make_domain(voxelize_sparse(sphere, vo), LatticeSpec{});
+    Eigen::Matrix3d A;
+    A << 1.3, 0.2, 0.0, -0.1, 0.8, 0.3, 0.1, 0.0, 1.1;
+    const Eigen::Vector3d shift(0.05, -0.1, 0.2);
+    Lattice moved = domain.lattice;
+    for (auto& p : moved.points()) p = A * p + shift;
+    const std::vector<WarpStep> steps = {{domain.lattice, moved}};
+    const double h = domain.voxmap.voxel_size();
+    TriangleMesh out = extract(warp(domain, moved));
+    const TriangleMesh extracted = out;
+    const SnapOptions options{.voxel_size = h};
+    const std::vector<SourcePoint> sources = find_sources(out, sphere, steps, options);
+    const SnapReport report = snap_to_sources(out, sphere, steps, sources, options);
+    EXPECT_GE(double(report.snapped), 0.95 * double(out.vertices.size()));
+    // Pulled back by the inverse affine map, snapped vertices lie on the input; their sources are where they went.
+    TriangleMesh triangles;
+    const auto& faces = all_triangles(sphere, triangles);
+    std::vector<Eigen::Vector3d> back;
+    std::size_t moved_vertices = 0;
+    for (std::size_t v = 0; v < out.vertices.size(); ++v) {
+        if ((out.vertices[v] - extracted.vertices[v]).norm() == 0) continue;
+        ++moved_vertices;
+        back.push_back(A.inverse() * (out.vertices[v] - shift));
+        const auto& s = sources[v];
+        ASSERT_GE(s.face, 0);
+        const auto& t = faces[std::size_t(s.face)];
+        const Eigen::Vector3d source = s.barycentric[0] * sphere.vertices[std::size_t(t[0])] + s.barycentric[1] * sphere.vertices[std::size_t(t[1])] +
+                                       s.barycentric[2] * sphere.vertices[std::size_t(t[2])];
+        EXPECT_NEAR((back.back() - source).norm(), 0.0, 1e-6 * h);
+    }
+    EXPECT_EQ(moved_vertices, report.snapped);
+    double worst = 0;
+    for (double d : distances_to_surface(back, sphere)) worst = std::max(worst, d / h);
+    EXPECT_LE(worst, 1e-6);
+    // The surface as a whole: closer to the exact image than marching cubes alone.
+    TriangleMesh image = sphere;
+    for (auto& v : image.vertices) v = A * v + shift;
+    const DistanceStats after = symmetric_distance(out, image, {.samples = 50000}), before = symmetric_distance(extracted, image, {.samples = 50000});
+    std::printf("affine warp at 40: to the exact image mean %.4f p99 %.4f voxel (marching cubes alone %.4f, %.4f)\n", after.mean / h, after.p99 / h,
+                before.mean / h, before.p99 / h);
+    EXPECT_LT(after.mean, 0.7 * before.mean);
+    EXPECT_TRUE(topology(out).watertight());
+    EXPECT_FALSE(self_intersects(out));
+}
+
+TEST(Snap, BentBoxFacesFollowTheExactWarp) {
+    // data/box_bend.json at 128: face normals against the same lattice map applied to the finely subdivided box.
+    const TriangleMesh box = read_mesh(test::data_path("box.obj"));
+    const EditScript script = read_edit_file(test::data_path("box_bend.json"));
+    DeformOptions options;
+    options.voxelize.resolution = 128;
+    DeformReport report, exact_report;
+    const TriangleMesh out = deform_mesh(box, script, options, report);
+    const double h = report.voxel_size;
+    TriangleMesh fine = box;
+    auto longest = [](const TriangleMesh& m) {
+        double worst = 0;
+        for (const auto& t : m.triangles)
+            for (int e = 0; e < 3; ++e) worst = std::max(worst, (m.vertices[std::size_t(t[std::size_t(e)])] - m.vertices[std::size_t(t[std::size_t((e + 1) % 3)])]).norm());
+        return worst;
+    };
+    while (longest(fine) > 0.5 * h) { // edges under half a voxel: the vertex FFD follows the map between them
+        TriangleMesh finer;
+        finer.vertices = fine.vertices;
+        std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> middle;
+        auto mid = [&](std::int32_t a, std::int32_t b) {
+            const auto key = std::minmax(a, b);
+            if (auto it = middle.find(key); it != middle.end()) return it->second;
+            finer.vertices.push_back(0.5 * (fine.vertices[std::size_t(a)] + fine.vertices[std::size_t(b)]));
+            return middle[key] = std::int32_t(finer.vertices.size() - 1);
+        };
+        for (const auto& t : fine.triangles) {
+            const std::int32_t a = mid(t[0], t[1]), b = mid(t[1], t[2]), c = mid(t[2], t[0]);
+            finer.triangles.insert(finer.triangles.end(), {{t[0], a, c}, {a, t[1], b}, {c, b, t[2]}, {a, b, c}});
+        }
+        fine = std::move(finer);
+    }
+    const TriangleMesh exact = deform_vertices(fine, script, options, exact_report);
+    // The exact normal at a point: the normal of the exact mesh's nearest face (CGAL's AABB tree).
+    using K = CGAL::Simple_cartesian<double>;
+    using Iterator = std::vector<K::Triangle_3>::const_iterator;
+    using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, CGAL::AABB_triangle_primitive<K, Iterator>>>;
+    std::vector<K::Triangle_3> triangles;
+    auto point = [&](std::int32_t i) { return K::Point_3(exact.vertices[std::size_t(i)].x(), exact.vertices[std::size_t(i)].y(), exact.vertices[std::size_t(i)].z()); };
+    for (const auto& t : exact.triangles) triangles.emplace_back(point(t[0]), point(t[1]), point(t[2]));
+    Tree tree(triangles.begin(), triangles.end());
+    tree.accelerate_distance_queries();
+    auto exact_normal = [&](const Eigen::Vector3d& p) {
+        const auto& t = exact.triangles[std::size_t(tree.closest_point_and_primitive(K::Point_3(p.x(), p.y(), p.z())).second - triangles.cbegin())];
+        return Eigen::Vector3d((exact.vertices[std::size_t(t[1])] - exact.vertices[std::size_t(t[0])])
+                                   .cross(exact.vertices[std::size_t(t[2])] - exact.vertices[std::size_t(t[0])])
+                                   .normalized());
+    };
+    const auto errors = normal_errors(out, exact_normal);
+    std::printf("bent box at 128: face normals off the exact warp, median %.3f p90 %.3f degrees; %zu snapped, %zu not\n", errors[errors.size() / 2],
+                errors[errors.size() * 9 / 10], report.snapped_vertices, report.unsnapped_vertices);
+    EXPECT_LE(errors[errors.size() / 2], 0.3);
+    EXPECT_LE(errors[errors.size() * 9 / 10], 1.0);
+    EXPECT_LE(errors.back(), 90.0); // no face turned over (the chamfers along the box's edges stand at 45 degrees)
+    EXPECT_TRUE(topology(out).watertight());
+    EXPECT_FALSE(self_intersects(out));
+}
+
+TEST(Snap, AScanWhoseSheetsAlmostTouchDoesNotFoldIntoItself) {
+    // The snowden scan's nose edit at 64: the thin-part carry leaves extracted sheets a few hundredths of a voxel
+    // apart; snapping each onto its own side of the input must not push one through the other.
+    const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
+    const EditScript script = read_edit_file(test::data_path("snowden_nose.json"));
+    DeformOptions options;
+    options.voxelize.resolution = 64;
+    DeformReport report, plain_report;
+    const TriangleMesh out = deform_mesh(scan, script, options, report);
+    options.snap = false;
+    const TriangleMesh plain = deform_mesh(scan, script, options, plain_report);
+    // Walls about a voxel thick everywhere: vertices move at most a third of the way to the other sheet.
+    EXPECT_GT(report.snapped_vertices, out.vertices.size() / 4);
+    EXPECT_FALSE(self_intersects(plain));
+    EXPECT_FALSE(self_intersects(out));
+    EXPECT_EQ(topology(out).euler, topology(plain).euler);
+    EXPECT_TRUE(topology(out).watertight());
+}
+
+} // namespace
+} // namespace voxwarp
