@@ -7,16 +7,21 @@
 
 namespace voxwarp::bench {
 
-static void BM_Deform(benchmark::State& state) {
+/// With snap (the default) or without: the difference is what finding source points and snapping cost.
+static void deform_bunny_ear(benchmark::State& state, bool snap) {
     const TriangleMesh& bunny = bunny_mesh();
     static const EditScript script = read_edit_file(std::string(VOXWARP_DATA_DIR) + "/bunny_ear.json");
     DeformOptions options;
     options.voxelize.resolution = int(state.range(0));
+    options.snap = snap;
     for (auto _ : state) {
         DeformReport report;
         benchmark::DoNotOptimize(deform_mesh(bunny, script, options, report));
     }
 }
+static void BM_Deform(benchmark::State& state) { deform_bunny_ear(state, true); }
+static void BM_DeformNoSnap(benchmark::State& state) { deform_bunny_ear(state, false); }
 BENCHMARK(BM_Deform)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_DeformNoSnap)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 } // namespace voxwarp::bench
