@@ -149,6 +149,30 @@ inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& h
     return m;
 }
 
+/// Split every triangle into four until no edge is longer than `longest`: the vertex FFD of the result follows
+/// the map between the input's vertices.
+inline TriangleMesh subdivided(TriangleMesh m, double longest) {
+    for (;;) {
+        double worst = 0;
+        for (const auto& t : m.triangles)
+            for (int e = 0; e < 3; ++e) worst = std::max(worst, (m.vertices[std::size_t(t[std::size_t(e)])] - m.vertices[std::size_t(t[std::size_t((e + 1) % 3)])]).norm());
+        if (worst <= longest) return m;
+        std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> middle;
+        auto midpoint = [&](std::int32_t a, std::int32_t b) {
+            const auto key = std::minmax(a, b);
+            if (const auto it = middle.find(key); it != middle.end()) return it->second;
+            m.vertices.push_back(0.5 * (m.vertices[std::size_t(a)] + m.vertices[std::size_t(b)]));
+            return middle[key] = std::int32_t(m.vertices.size() - 1);
+        };
+        std::vector<std::array<std::int32_t, 3>> finer;
+        for (const auto t : m.triangles) {
+            const std::int32_t a = midpoint(t[0], t[1]), b = midpoint(t[1], t[2]), c = midpoint(t[2], t[0]);
+            finer.insert(finer.end(), {{t[0], a, c}, {a, t[1], b}, {c, b, t[2]}, {a, b, c}});
+        }
+        m.triangles = std::move(finer);
+    }
+}
+
 using Map = std::function<Eigen::Vector3d(const Eigen::Vector3d&)>;
 
 /// A box of length `length` along x (centred on the origin) and cross-section `width` x `width`.

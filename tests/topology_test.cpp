@@ -13,34 +13,9 @@
 
 #include <gtest/gtest.h>
 
-#include <map>
 
 namespace voxwarp {
 namespace {
-
-/// Split every triangle into four until no edge is longer than `longest`: the vertex FFD of the result follows
-/// the map between the input's vertices.
-TriangleMesh subdivided(TriangleMesh m, double longest) {
-    for (;;) {
-        double worst = 0;
-        for (const auto& t : m.triangles)
-            for (int e = 0; e < 3; ++e) worst = std::max(worst, (m.vertices[std::size_t(t[std::size_t(e)])] - m.vertices[std::size_t(t[std::size_t((e + 1) % 3)])]).norm());
-        if (worst <= longest) return m;
-        std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> middle;
-        auto midpoint = [&](std::int32_t a, std::int32_t b) {
-            const auto key = std::minmax(a, b);
-            if (const auto it = middle.find(key); it != middle.end()) return it->second;
-            m.vertices.push_back(0.5 * (m.vertices[std::size_t(a)] + m.vertices[std::size_t(b)]));
-            return middle[key] = std::int32_t(m.vertices.size() - 1);
-        };
-        std::vector<std::array<std::int32_t, 3>> finer;
-        for (const auto t : m.triangles) {
-            const std::int32_t a = midpoint(t[0], t[1]), b = midpoint(t[1], t[2]), c = midpoint(t[2], t[0]);
-            finer.insert(finer.end(), {{t[0], a, c}, {a, t[1], b}, {c, b, t[2]}, {a, b, c}});
-        }
-        m.triangles = std::move(finer);
-    }
-}
 
 Constraint constraint(ConstraintKind kind, const Eigen::Vector3d& p, const Eigen::Vector3d& to) {
     Constraint c;
@@ -67,7 +42,7 @@ void expect_topology_kept(const std::string& family, const TriangleMesh& mesh, i
     const MeshTopology expected = topology(round_trip);
     const double h = voxelize_frame(mesh, options.voxelize).voxel_size;
     const double round_trip_p99 = one_sided_distance(mesh, round_trip).p99 / h;
-    const TriangleMesh fine = subdivided(mesh, h);
+    const TriangleMesh fine = test::subdivided(mesh, h);
     for (const double voxels : {0.5, 4.0}) {
         SCOPED_TRACE("a move of " + std::to_string(voxels) + " voxels");
         const EditScript script = edit_of(bounds(mesh), h, voxels);

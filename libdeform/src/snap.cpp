@@ -133,7 +133,8 @@ Eigen::Vector3d closest_barycentric(const Eigen::Vector3d& p, const Eigen::Vecto
     return {1 - v - w, v, w};
 }
 
-/// Area-weighted vertex normals (unnormalized sums of face cross products), quads split along their diagonal 0-2.
+/// Area-weighted vertex normals (unnormalized sums of face cross products; a quad counts by the cross product of
+/// its diagonals, twice its vector area).
 std::vector<Eigen::Vector3d> vertex_normals(const TriangleMesh& mesh) {
     std::vector<Eigen::Vector3d> n(mesh.vertices.size(), Eigen::Vector3d::Zero());
     const auto& V = mesh.vertices;

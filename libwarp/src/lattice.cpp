@@ -101,23 +101,8 @@ Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {
 }
 
 Eigen::Matrix3d Lattice::jacobian(const Eigen::Vector3d& stu) const {
-    std::array<int, 3> r;
-    std::array<std::array<double, 4>, 3> b, d;
-    for (int a = 0; a < 3; ++a) {
-        double t;
-        r[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
-        b[std::size_t(a)] = cubic_basis(t);
-        d[std::size_t(a)] = cubic_basis_derivative(t);
-    }
-    Eigen::Matrix3d J = Eigen::Matrix3d::Zero();
-    for (int k = 0; k < 4; ++k)
-        for (int j = 0; j < 4; ++j)
-            for (int i = 0; i < 4; ++i) {
-                const Eigen::Vector3d& p = point(r[0] + i, r[1] + j, r[2] + k);
-                J.col(0) += d[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)] * p;
-                J.col(1) += b[0][std::size_t(i)] * d[1][std::size_t(j)] * b[2][std::size_t(k)] * p;
-                J.col(2) += b[0][std::size_t(i)] * b[1][std::size_t(j)] * d[2][std::size_t(k)] * p;
-            }
+    Eigen::Matrix3d J;
+    evaluate(stu, J);
     return J;
 }
 
