@@ -5,10 +5,10 @@
 //   GET  /api/edit              the edit file given on the command line (204 when none)
 //   POST /api/deform[?resolution=N]   body: an edit file's JSON; 200: the deformed mesh (binary PLY,
 //                               Content-Type application/ply), the report as JSON in the X-Voxwarp-Report header
-// Errors answer {"error": message}: 400 malformed edits (the CLI's message, the file named "request"), 404
-// unknown paths, 409 a request superseded by a newer one (which runs instead), 413 bodies over 16 MiB, 503
-// memory or time limits, 500 anything else. One deform runs at a time; the server keeps serving whatever a
-// request does.
+// Errors answer {"error": message}: 400 malformed edits (the CLI's message, the file named "request") or a
+// resolution over --max-resolution, 403 a foreign Host or Origin or a missing token (web.h, Gate), 404 unknown
+// paths, 409 a request superseded by a newer one (which runs instead), 413 bodies over 16 MiB, 503 memory or
+// time limits, 500 anything else. One deform runs at a time; the server keeps serving whatever a request does.
 #include "cli_common.h"
 #include "web.h"
 
@@ -19,8 +19,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <csignal>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -32,9 +35,10 @@ namespace voxwarp::cli {
 namespace {
 
 struct EditArgs {
-    std::string mesh, edits;
-    int port = 8765, resolution = 128, max_seconds = 120;
-    bool no_browser = false;
+    std::string mesh, edits, token;
+    int port = 8765, resolution = 128, max_seconds = 120, max_resolution = 0;
+    double max_memory_gib = 0;
+    bool no_browser = false, no_token = false;
 };
 
 std::atomic<httplib::Server*> g_server{nullptr};
@@ -50,6 +54,7 @@ public:
     static DeformOptions options(const EditArgs& args) {
         DeformOptions o;
         o.voxelize.resolution = args.resolution;
+        o.voxelize.max_memory_bytes = std::uint64_t(args.max_memory_gib * double(1ull << 30));
         return o;
     }
 
@@ -63,8 +68,9 @@ public:
             } catch (const std::exception&) {
                 used = 0;
             }
-            if (used != text.size() || resolution < 8 || resolution > 1024)
-                return send_error(response, 400, "request: resolution '" + text.substr(0, 20) + "': expected an integer in [8, 1024]");
+            if (used != text.size() || resolution < 8 || resolution > args_.max_resolution)
+                return send_error(response, 400, "request: resolution '" + text.substr(0, 20) + "': expected an integer in [8, " +
+                                                     std::to_string(args_.max_resolution) + "] (--max-resolution)");
         }
         EditScript script;
         try {
@@ -90,7 +96,6 @@ public:
             send_mesh(response, out);
             // One line of JSON: a header holds it.
             response.set_header("X-Voxwarp-Report", nlohmann::json::parse(report_json(report)).dump());
-            response.set_header("Access-Control-Expose-Headers", "X-Voxwarp-Report");
         } catch (const Cancelled&) {
             if (late) return send_error(response, 503, "request: took longer than " + std::to_string(args_.max_seconds) + " s (--max-seconds)");
             send_error(response, 409, "request: superseded by a newer request");
@@ -137,8 +142,22 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
         ->check(CLI::Range(8, 1024))
         ->capture_default_str();
     cmd->add_option("--max-seconds", a->max_seconds, "Longest a deform request may take")->check(CLI::Range(1, 3600))->capture_default_str();
+    cmd->add_option("--max-resolution", a->max_resolution, "Highest resolution a request may ask for (default: twice --resolution, at most 1024)")
+        ->check(CLI::Range(8, 1024));
+    cmd->add_option("--max-memory", a->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)")->check(CLI::PositiveNumber);
+    auto* token = cmd->add_option("--token", a->token, "The session's token (letters, digits, - _ . ~; at least 16), for scripts; default: 128 random bits");
+    cmd->add_flag("--no-token", a->no_token, "Let /api/ requests in without the token (any local program, and any page you visit, can then use the server)")
+        ->excludes(token);
     cmd->add_flag("--no-browser", a->no_browser, "Do not open a browser; print the address only");
     cmd->callback([a, &global, &action] {
+        if (a->max_resolution == 0) a->max_resolution = std::min(1024, 2 * a->resolution);
+        if (a->max_resolution < a->resolution)
+            throw CLI::ValidationError("--max-resolution", std::to_string(a->max_resolution) + " is below --resolution " + std::to_string(a->resolution));
+        if (!a->token.empty()) {
+            const bool url_safe = std::all_of(a->token.begin(), a->token.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || std::strchr("-_.~", c); });
+            if (!url_safe || a->token.size() < 16 || a->token.size() > 256)
+                throw CLI::ValidationError("--token", "expected 16 to 256 letters, digits, '-', '_', '.' or '~'");
+        }
         action = [a, &global] {
             TriangleMesh mesh = read_mesh(a->mesh);
             std::string initial_edit;
@@ -150,7 +169,11 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
                 initial_edit = text.str();
             }
             Editor editor(*a, std::move(mesh));
+            Gate gate{0, a->no_token ? std::string() : a->token.empty() ? random_token() : a->token};
+            if (a->no_token) // a warning even with -q: it says who else can use the server
+                std::fprintf(stderr, "voxwarp: warning: edit --no-token: any program on this machine, and any web page open in its browsers, can use the server\n");
             httplib::Server server;
+            guard(server, gate);
             server.set_payload_max_length(16u << 20);
             server.set_read_timeout(30, 0);
             server.set_write_timeout(30, 0);
@@ -177,7 +200,8 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
             });
             const int port = a->port == 0 ? server.bind_to_any_port("127.0.0.1") : (server.bind_to_port("127.0.0.1", a->port) ? a->port : -1);
             if (port <= 0) throw IOError("edit: cannot listen on 127.0.0.1:" + std::to_string(a->port) + " (in use? try --port 0)");
-            const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/";
+            gate.port = port;
+            const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/" + (gate.token.empty() ? "" : "?token=" + gate.token);
             // The address goes to stdout (scripts read it), the rest of the chatter to stderr.
             std::printf("voxwarp edit: serving %s at %s\n", a->mesh.c_str(), url.c_str());
             std::fflush(stdout);

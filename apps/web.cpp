@@ -6,8 +6,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cctype>
+#include <cerrno>
 #include <condition_variable>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -15,6 +18,7 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/random.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -61,6 +65,70 @@ std::optional<Asset> find_asset(const std::string& path) {
 void send_error(httplib::Response& response, int status, const std::string& message) {
     response.status = status;
     response.set_content(nlohmann::json{{"error", message}}.dump() + "\n", "application/json");
+}
+
+namespace {
+
+std::string lower(std::string text) {
+    for (char& c : text) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return text;
+}
+
+// The names this server answers to: loopback, on its own port.
+bool loopback_host(const std::string& host, int port) {
+    const std::string h = lower(host), p = ":" + std::to_string(port);
+    return h == "127.0.0.1" + p || h == "localhost" + p || h == "[::1]" + p;
+}
+
+// Compares every byte whatever the first difference, so that the time taken does not tell how much of a guess was right.
+bool same_secret(const std::string& a, const std::string& b) {
+    if (a.size() != b.size()) return false;
+    unsigned char differ = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) differ |= static_cast<unsigned char>(a[i] ^ b[i]);
+    return differ == 0;
+}
+
+} // namespace
+
+void guard(httplib::Server& server, const Gate& gate) {
+    server.set_pre_routing_handler([&gate](const httplib::Request& request, httplib::Response& response) {
+        using Answer = httplib::Server::HandlerResponse;
+        if (!loopback_host(request.get_header_value("Host"), gate.port)) {
+            send_error(response, 403, "request: Host must be 127.0.0.1:" + std::to_string(gate.port) + ", localhost:" + std::to_string(gate.port) +
+                                          " or [::1]:" + std::to_string(gate.port));
+            return Answer::Handled;
+        }
+        if (request.has_header("Origin")) {
+            const std::string origin = lower(request.get_header_value("Origin"));
+            if (origin.rfind("http://", 0) != 0 || !loopback_host(origin.substr(7), gate.port)) {
+                send_error(response, 403, "request: cross-origin requests are refused");
+                return Answer::Handled;
+            }
+        }
+        if (!gate.token.empty() && request.path.rfind("/api/", 0) == 0 && !same_secret(request.get_header_value("X-Voxwarp-Token"), gate.token)) {
+            send_error(response, 403, "request: missing or wrong X-Voxwarp-Token (the token is in the URL voxwarp printed)");
+            return Answer::Handled;
+        }
+        return Answer::Unhandled;
+    });
+}
+
+std::string random_token() {
+    unsigned char bytes[16];
+    std::size_t got = 0;
+    while (got < sizeof bytes) {
+        const ssize_t n = ::getrandom(bytes + got, sizeof bytes - got, 0);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) throw IOError(std::string("no random bytes for the session token: ") + std::strerror(errno));
+        got += std::size_t(n);
+    }
+    static const char digits[] = "0123456789abcdef";
+    std::string token;
+    for (const unsigned char b : bytes) {
+        token += digits[b >> 4];
+        token += digits[b & 15];
+    }
+    return token;
 }
 
 void serve_assets(httplib::Server& server) {
@@ -178,7 +246,9 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     std::mutex mutex;
     std::condition_variable done;
     std::string png, page_error;
+    Gate gate{0, random_token()}; // the server is up for a moment, but any page the user has open could reach it
     httplib::Server server;
+    guard(server, gate);
     server.Get("/api/render/config", [&](const httplib::Request&, httplib::Response& r) { r.set_content(config.dump(), "application/json"); });
     server.Get(R"(/api/render/mesh/(\d+))", [&](const httplib::Request& q, httplib::Response& r) {
         const std::size_t i = std::stoul(q.matches[1]);
@@ -200,6 +270,7 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     serve_assets(server);
     const int port = server.bind_to_any_port("127.0.0.1");
     if (port <= 0) throw IOError("render: cannot listen on 127.0.0.1");
+    gate.port = port;
     std::thread listener([&] { server.listen_after_bind(); });
     // stop() only stops a server that has started listening: wait for that first.
     for (int i = 0; i < 500 && !server.is_running(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
@@ -213,7 +284,7 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     } stop{server, listener};
     std::string failure;
     {
-        Browser browser("http://127.0.0.1:" + std::to_string(port) + "/render.html", options.width, options.height);
+        Browser browser("http://127.0.0.1:" + std::to_string(port) + "/render.html?token=" + gate.token, options.width, options.height);
         std::unique_lock lock(mutex);
         const auto deadline = std::chrono::steady_clock::now() + options.timeout;
         while (png.empty() && page_error.empty() && std::chrono::steady_clock::now() < deadline) {

@@ -22,6 +22,22 @@ struct Asset {
 };
 std::optional<Asset> find_asset(const std::string& path);
 
+/// Who a local server lets in. Every request must name the server by a loopback `Host` (127.0.0.1, localhost or
+/// [::1], with `port`), so that a page of another site, resolved to 127.0.0.1 by DNS rebinding, is refused; a
+/// request that carries an `Origin` must come from the server's own page (a cross-site form or fetch is refused);
+/// and, when `token` is not empty, every /api/ request must carry it in the `X-Voxwarp-Token` header, which only
+/// a page the server itself handed the token to (in its URL) can know. Refusals answer 403 before any work.
+struct Gate {
+    int port = 0;      ///< set once the server is bound
+    std::string token; ///< empty: no token asked for
+};
+
+/// Install `gate` (which must outlive `server`) in front of every route: a pre-routing handler.
+void guard(httplib::Server& server, const Gate& gate);
+
+/// A fresh token: 128 random bits from the system's entropy source, as 32 hex digits. @throw IOError when there is none.
+std::string random_token();
+
 /// Serve every embedded file (GET) and answer other GETs with 404.
 void serve_assets(httplib::Server& server);
 

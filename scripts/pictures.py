@@ -125,7 +125,7 @@ from selenium.webdriver.chrome.service import Service  # noqa: E402
 
 server = subprocess.Popen([cli, "edit", os.path.join(data, "bunny.obj"), os.path.join(data, "bunny_ear.json"), "--no-browser", "--port", "0", "-q"],
                           stdout=subprocess.PIPE, text=True)
-url = re.search(r"(http://127\.0\.0\.1:\d+/)", server.stdout.readline()).group(1)
+url = re.search(r"(http://127\.0\.0\.1:\d+/\S*)", server.stdout.readline()).group(1)  # with its ?token=
 options = webdriver.ChromeOptions()
 options.binary_location = "/usr/bin/chromium"
 for a in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--disable-background-networking", "--no-first-run",

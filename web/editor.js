@@ -112,7 +112,7 @@
     api.requests++;
     const body = api.editJSON();
     const started = performance.now();
-    return fetch('/api/deform?resolution=' + resolution, { method: 'POST', body: body, headers: { 'Content-Type': 'application/json' } })
+    return Viewer.api('/api/deform?resolution=' + resolution, { method: 'POST', body: body, headers: { 'Content-Type': 'application/json' } })
       .then(async function (response) {
         if (response.status === 409) return; // superseded: a newer request is on its way
         if (!response.ok) {
@@ -358,7 +358,11 @@
     api.renderMs = performance.now() - t;
   }
   (async function start() {
-    const response = await fetch('/api/model');
+    const response = await Viewer.api('/api/model');
+    if (!response.ok) {
+      const e = await response.json().catch(() => ({ error: response.statusText }));
+      throw new Error(e.error + (response.status === 403 ? ': open the address that voxwarp edit printed, with its ?token=' : ''));
+    }
     const facts = JSON.parse(response.headers.get('X-Voxwarp-Model') || '{}');
     fullResolution = facts.resolution || 128;
     modelName = facts.name || 'model';
@@ -374,7 +378,7 @@
     syncControls(); showSource();
     status.textContent = modelName + ': ' + facts.vertices + ' vertices, ' + facts.faces + ' faces; full result at resolution ' + fullResolution;
     frame();
-    const initial = await fetch('/api/edit');
+    const initial = await Viewer.api('/api/edit');
     if (initial.status === 200) await api.loadEdit(await initial.text());
     api.ready = true;
   })().catch(e => showError('loading the model failed: ' + e));

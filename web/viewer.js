@@ -4,6 +4,15 @@
 
 const Viewer = {};
 
+/// fetch() of the server's API with the session token: the server printed the page's URL with ?token=..., and
+/// refuses /api/ requests that do not carry it back (a page of another site cannot read it).
+Viewer.token = new URLSearchParams(window.location.search).get('token') || '';
+Viewer.api = function (path, init) {
+  init = Object.assign({}, init || {});
+  init.headers = Object.assign({ 'X-Voxwarp-Token': Viewer.token }, init.headers || {});
+  return fetch(path, init);
+};
+
 /// Binary little-endian PLY as voxwarp writes it (float x y z, then faces as a uchar count and int indices;
 /// polygons are fanned) into a BufferGeometry.
 Viewer.parsePly = function (buffer) {

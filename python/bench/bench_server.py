@@ -30,13 +30,14 @@ with tempfile.TemporaryDirectory() as folder:
         cli.append(time.perf_counter() - start)
 
 server = subprocess.Popen([args.cli, "edit", mesh, "--no-browser", "--port", "0", "-q", "-r", str(args.resolution)], stdout=subprocess.PIPE, text=True)
-url = re.search(r"(http://127\.0\.0\.1:\d+/)", server.stdout.readline()).group(1)
+match = re.search(r"(http://127\.0\.0\.1:\d+/)\?token=(\w+)", server.stdout.readline())
+url, token = match.group(1), match.group(2)
 body = open(edit, "rb").read()
 posts = []
 try:
     for _ in range(args.repetitions + 1):
         start = time.perf_counter()
-        with urllib.request.urlopen(urllib.request.Request(url + "api/deform", data=body, method="POST")) as r:
+        with urllib.request.urlopen(urllib.request.Request(url + "api/deform", data=body, method="POST", headers={"X-Voxwarp-Token": token})) as r:
             r.read()
         posts.append(time.perf_counter() - start)
 finally:

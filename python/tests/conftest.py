@@ -1,6 +1,10 @@
 # Shared fixtures of the Python suite: the bundled data, the CLI, small analytic meshes.
 import os
+import re
 import subprocess
+import urllib.error
+import urllib.parse
+import urllib.request
 
 import numpy as np
 import pytest
@@ -15,6 +19,41 @@ def data(name):
 
 def run_cli(*args):
     return subprocess.run([CLI, *map(str, args)], capture_output=True, text=True)
+
+
+class EditServer:
+    """`voxwarp edit ... --no-browser --port 0` in the background: its printed URL, port and session token."""
+
+    def __init__(self, *args):
+        self.process = subprocess.Popen([CLI, "edit", *map(str, args), "--no-browser", "--port", "0", "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = self.process.stdout.readline()
+        match = re.search(r"at (http://127\.0\.0\.1:(\d+)/(\S*))", line)
+        assert match, line + self.process.stderr.read()
+        self.url, self.port = match.group(1), int(match.group(2))
+        self.base = "http://127.0.0.1:%d" % self.port
+        self.token = urllib.parse.parse_qs(urllib.parse.urlparse(self.url).query).get("token", [""])[0]
+
+    def request(self, method, path, body=None, headers=None, timeout=120):
+        """(status, body, headers) of a request with the session's token unless `headers` says otherwise."""
+        all_headers = {"X-Voxwarp-Token": self.token}
+        all_headers.update(headers or {})
+        data = body if body is None or isinstance(body, bytes) else body.encode()
+        request = urllib.request.Request(self.base + path, data=data, method=method, headers={k: v for k, v in all_headers.items() if v is not None})
+        try:
+            with urllib.request.urlopen(request, timeout=timeout) as r:
+                return r.status, r.read(), dict(r.headers)
+        except urllib.error.HTTPError as e:
+            return e.code, e.read(), dict(e.headers)
+
+    def post(self, path, body, timeout=120):
+        return self.request("POST", path, body, timeout=timeout)
+
+    def get(self, path, **kwargs):
+        return self.request("GET", path, **kwargs)
+
+    def stop(self):
+        self.process.terminate()
+        self.process.wait(timeout=20)
 
 
 def box(lo=(-2, -0.5, -0.5), hi=(2, 0.5, 0.5)):

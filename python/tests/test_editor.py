@@ -1,23 +1,18 @@
-# The editor in a real browser (Debian's chromium driven through chromedriver by selenium): click the model,
-# drag the handle, check the shown mesh and the saved edit file against the CLI; and the server against 200 bad
-# requests. Frame rate of the live drag is printed (the README quotes it).
+# The editor in a real browser (Debian's chromium driven through chromedriver by selenium), opened through the
+# URL the server prints (its token in it): click the model, drag the handle, check the shown mesh and the saved
+# edit file against the CLI. Frame rate of the live drag is printed (the README quotes it). The server without a
+# browser: test_editor_server.py.
 import base64
 import io
-import json
 import os
-import re
-import socket
 import subprocess
 import tempfile
-import threading
 import time
-import urllib.error
-import urllib.request
 
 import pytest
 
 import voxwarp
-from conftest import CLI, data, run_cli
+from conftest import CLI, EditServer, data, run_cli
 
 selenium = pytest.importorskip("selenium")
 from selenium import webdriver  # noqa: E402
@@ -27,30 +22,9 @@ from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
 CHROMEDRIVER = "/usr/bin/chromedriver"
 
 
-class Server:
-    def __init__(self, *args):
-        self.process = subprocess.Popen([CLI, "edit", *map(str, args), "--no-browser", "--port", "0", "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.process.stdout.readline()
-        match = re.search(r"at (http://127\.0\.0\.1:(\d+)/)", line)
-        assert match, line + self.process.stderr.read()
-        self.url, self.port = match.group(1), int(match.group(2))
-
-    def post(self, path, body, timeout=120):
-        request = urllib.request.Request(self.url.rstrip("/") + path, data=body if isinstance(body, bytes) else body.encode(), method="POST")
-        try:
-            with urllib.request.urlopen(request, timeout=timeout) as r:
-                return r.status, r.read(), dict(r.headers)
-        except urllib.error.HTTPError as e:
-            return e.code, e.read(), dict(e.headers)
-
-    def stop(self):
-        self.process.terminate()
-        self.process.wait(timeout=20)
-
-
 @pytest.fixture
 def server():
-    s = Server(data("bunny.obj"), "--resolution", "128")
+    s = EditServer(data("bunny.obj"), "--resolution", "128")
     yield s
     s.stop()
     assert s.process.returncode == 0, s.process.stderr.read()
@@ -166,7 +140,7 @@ def test_click_drag_save_and_the_cli_agree(server, tmp_path):
         r = run_cli("deform", data("bunny.obj"), edit, "-o", tmp_path / "cli.ply", "-r", 128, "-q")
         assert r.returncode == 0, r.stderr
         assert (tmp_path / "cli.ply").read_bytes() == shown
-        model = urllib.request.urlopen(server.url + "api/model").read()
+        model = server.get("/api/model")[1]
         assert shown != model
 
         png = driver.get_screenshot_as_png()
@@ -175,71 +149,6 @@ def test_click_drag_save_and_the_cli_agree(server, tmp_path):
         assert size[0] >= 800 and share > 0.1 and colours > 50, (size, share, colours)
     finally:
         driver.quit()
-
-
-def test_server_survives_200_bad_requests(server):
-    good = open(data("bunny_ear.json"), "rb").read()
-    statuses = {}
-
-    def raw(payload, read=True):
-        with socket.create_connection(("127.0.0.1", server.port), timeout=10) as s:
-            s.sendall(payload)
-            if read:
-                s.settimeout(10)
-                try:
-                    return s.recv(200)
-                except socket.timeout:
-                    return b""
-        return b""
-
-    for i in range(200):
-        kind = i % 8
-        if kind == 0:
-            code, body, _ = server.post("/api/deform", b"{ not json")
-            assert code == 400 and json.loads(body)["error"].startswith("request: not valid JSON"), body
-        elif kind == 1:
-            code, body, _ = server.post("/api/deform", '{"edits": [{"constraints": [{"move": [0, 0, "x"], "to": [0, 1, 0]}]}]}')
-            assert code == 400 and "request: edits[0].constraints[0].move[2]" in json.loads(body)["error"], body
-        elif kind == 2:
-            code, body, _ = server.post("/api/deform", b"x" * (17 << 20))
-            assert code == 413, code
-        elif kind == 3:
-            code, body, _ = server.post("/api/nowhere", b"{}")
-            assert code == 404, code
-        elif kind == 4:  # the connection closes in the middle of the headers
-            raw(b"POST /api/deform HTTP/1.1\r\nHost: x\r\nContent-Len", read=False)
-            code = "closed"
-        elif kind == 5:  # ... or of the body
-            raw(b"POST /api/deform HTTP/1.1\r\nHost: x\r\nContent-Length: 1000\r\n\r\n{\"edits\"", read=False)
-            code = "closed"
-        elif kind == 6:
-            code, body, _ = server.post("/api/deform?resolution=99999", good)
-            assert code == 400 and "resolution" in json.loads(body)["error"], body
-        else:
-            reply = raw(b"GARBAGE\r\n\r\n")
-            code = reply[:12].decode(errors="replace")
-        statuses[kind] = code
-    code, body, headers = server.post("/api/deform?resolution=48", good)
-    assert code == 200 and body.startswith(b"ply\nformat binary_little_endian"), (code, body[:100])
-    report = json.loads(headers["X-Voxwarp-Report"])
-    assert report["edits"][0]["constraints"][0]["residual_voxels"] < 1e-6
-    assert server.process.poll() is None
-
-
-def test_a_newer_request_supersedes_the_running_one(server):
-    good = open(data("bunny_ear.json"), "rb").read()
-    results = {}
-
-    def slow():
-        results["slow"] = server.post("/api/deform?resolution=384", good)[0]
-
-    thread = threading.Thread(target=slow)
-    thread.start()
-    time.sleep(0.3)
-    results["fast"] = server.post("/api/deform?resolution=32", good)[0]
-    thread.join()
-    assert results["fast"] == 200
-    assert results["slow"] in (200, 409)  # cancelled in favour of the newer one, or finished first
 
 
 def test_render_writes_a_picture_of_the_meshes(tmp_path):
