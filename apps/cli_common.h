@@ -66,6 +66,7 @@ void add_voxelize(CLI::App& app, Global& global, Action& action);
 void add_extract(CLI::App& app, Global& global, Action& action);
 void add_info(CLI::App& app, Global& global, Action& action);
 void add_deform(CLI::App& app, Global& global, Action& action);
+void add_remesh(CLI::App& app, Global& global, Action& action);
 void add_warp(CLI::App& app, Global& global, Action& action);
 void add_compare(CLI::App& app, Global& global, Action& action);
 void add_render(CLI::App& app, Global& global, Action& action);

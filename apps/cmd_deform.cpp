@@ -72,52 +72,89 @@ void finish(const Global& global, const DeformArgs& a, DeformReport& r, Clock::t
 
 } // namespace
 
+namespace {
+
+/// The options deform and remesh share: how the mesh becomes a voxmap and the voxmap a mesh again.
+void add_mesh_options(CLI::App* cmd, DeformArgs& a) {
+    auto* res = cmd->add_option("-r,--resolution", a.options.voxelize.resolution, "Voxels along the mesh's longest side")->capture_default_str();
+    cmd->add_option("--voxel-size", a.options.voxelize.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res);
+    cmd->add_option("--sign", a.sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
+        ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
+        ->capture_default_str();
+    add_mesher_option(cmd, a.options.extract.mesher);
+    cmd->add_flag("--no-snap", [&a](std::int64_t) { a.options.snap = false; },
+                  "Leave output vertices where extraction puts them (by default each moves onto the exact image of its source point on the input, when that moves it at most half a voxel and flips no face)");
+    cmd->add_option("--adaptivity", a.options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
+    auto* quads = cmd->add_flag("--quads", a.options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
+    cmd->add_option("--png", a.png, "Also write a before / after picture (voxwarp render's, headless Chromium)");
+    cmd->add_option("--faces", a.options.target_faces, "Decimate the output to about this many triangles (CGAL edge collapse)")
+        ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40))
+        ->excludes(quads);
+}
+
+/// Read the mesh (its warnings on stderr), deform it by `script` (none: the round trip), write the output and the report.
+void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script, Clock::time_point start) {
+    DeformReport report;
+    auto t = Clock::now();
+    std::vector<std::string> warnings;
+    const TriangleMesh mesh = read_mesh(a.input, &warnings);
+    for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+    report.seconds_read = seconds_since(t);
+    TriangleMesh out = attributing_errors(a, [&] {
+        return a.mode == "vertex" ? deform_vertices(mesh, script, a.options, report) : deform_mesh(mesh, script, a.options, report);
+    });
+    t = Clock::now();
+    write_mesh(out, a.output);
+    report.seconds_write = seconds_since(t);
+    finish(global, a, report, start);
+    note(global, "wrote " + a.output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces" +
+                     (report.attributes ? " (texture coordinates, colours and materials carried)" : ""));
+    if (!a.png.empty()) {
+        render_png({mesh, out}, {"before", "after"}, {}, a.png);
+        note(global, "wrote " + a.png);
+    }
+}
+
+void check_paths(DeformArgs& a, const Global& global) {
+    if (!is_mesh_path(a.output)) throw InvalidInput(a.output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
+    if (!a.png.empty() && std::filesystem::path(a.png).extension() != ".png") throw InvalidInput(a.png + ": expected a .png picture");
+    a.options.voxelize.max_memory_bytes = std::uint64_t(a.max_memory_gib * double(1ull << 30));
+    a.options.voxelize.sign = parse_sign(a.sign);
+    a.options.progress = stderr_progress(global);
+}
+
+} // namespace
+
 void add_deform(CLI::App& app, Global& global, Action& action) {
     auto a = std::make_shared<DeformArgs>();
     auto* cmd = app.add_subcommand("deform", "Mesh in, deformed re-polygonized mesh out: voxelize, warp by the edit file's constraints, extract");
     add_common_options(cmd, *a, true);
-    auto* res = cmd->add_option("-r,--resolution", a->options.voxelize.resolution, "Voxels along the mesh's longest side")->capture_default_str();
-    cmd->add_option("--voxel-size", a->options.voxelize.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res);
+    add_mesh_options(cmd, *a);
     cmd->add_option("--mode", a->mode, "volume (re-polygonized, crease-free) or vertex (classic FFD of the input's vertices, for comparison)")
         ->check(CLI::IsMember({"volume", "vertex"}))
         ->capture_default_str();
-    cmd->add_option("--sign", a->sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
-        ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
-        ->capture_default_str();
-    add_mesher_option(cmd, a->options.extract.mesher);
-    cmd->add_flag("--no-snap", [a](std::int64_t) { a->options.snap = false; },
-                  "Leave output vertices where extraction puts them (by default each moves onto the exact image of its source point on the input, when that moves it at most half a voxel and flips no face)");
-    cmd->add_option("--adaptivity", a->options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
-    auto* quads = cmd->add_flag("--quads", a->options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
-    cmd->add_option("--png", a->png, "Also write a before / after picture (voxwarp render's, headless Chromium)");
-    cmd->add_option("--faces", a->options.target_faces, "Decimate the output to about this many triangles (CGAL edge collapse)")
-        ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40))
-        ->excludes(quads);
     cmd->callback([a, &global, &action] {
         action = [a, &global] {
             const auto start = Clock::now();
-            if (!is_mesh_path(a->output)) throw InvalidInput(a->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
-            if (!a->png.empty() && std::filesystem::path(a->png).extension() != ".png") throw InvalidInput(a->png + ": expected a .png picture");
-            a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
-            a->options.voxelize.sign = parse_sign(a->sign);
-            a->options.progress = stderr_progress(global);
-            const EditScript script = read_edit_file(a->edits);
-            DeformReport report;
-            auto t = Clock::now();
-            const TriangleMesh mesh = read_mesh(a->input);
-            report.seconds_read = seconds_since(t);
-            TriangleMesh out = attributing_errors(*a, [&] {
-                return a->mode == "vertex" ? deform_vertices(mesh, script, a->options, report) : deform_mesh(mesh, script, a->options, report);
-            });
-            t = Clock::now();
-            write_mesh(out, a->output);
-            report.seconds_write = seconds_since(t);
-            finish(global, *a, report, start);
-            note(global, "wrote " + a->output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces");
-            if (!a->png.empty()) {
-                render_png({mesh, out}, {"before", "after"}, {}, a->png);
-                note(global, "wrote " + a->png);
-            }
+            check_paths(*a, global);
+            run_mesh_job(global, *a, read_edit_file(a->edits), start);
+        };
+    });
+}
+
+void add_remesh(CLI::App& app, Global& global, Action& action) {
+    auto a = std::make_shared<DeformArgs>();
+    auto* cmd = app.add_subcommand("remesh", "Mesh in, re-polygonized mesh out (the round trip, no edit): voxelize, extract, snap onto the input; texture coordinates, colours and materials carried");
+    cmd->add_option("input", a->input, "Input mesh (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("-o,--output", a->output, "Output mesh (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("--report", a->report, "Write a JSON report: volumes, timings, peak memory, snapped vertices");
+    cmd->add_option("--max-memory", a->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
+    add_mesh_options(cmd, *a);
+    cmd->callback([a, &global, &action] {
+        action = [a, &global] {
+            const auto start = Clock::now();
+            check_paths(*a, global);
+            run_mesh_job(global, *a, EditScript{}, start);
         };
     });
 }

@@ -60,6 +60,7 @@ int main(int argc, char** argv) {
     add_extract(app, global, action);
     add_info(app, global, action);
     add_deform(app, global, action);
+    add_remesh(app, global, action);
     add_warp(app, global, action);
     add_compare(app, global, action);
     add_render(app, global, action);

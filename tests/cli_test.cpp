@@ -193,6 +193,44 @@ TEST_F(Cli, RigidDeformIsByteIdenticalForAnyThreadCountAndReportsItsSolver) {
     EXPECT_NE(report.find("\"surface_miss_voxels\""), std::string::npos) << report;
 }
 
+TEST_F(Cli, RemeshCarriesTheTextureAndItsLibrary) {
+    // Spot copied into a folder of its own; the output goes to another, whose .mtl must still find the texture.
+    fs::create_directories(dir / "in");
+    fs::create_directories(dir / "out");
+    for (const char* name : {"spot_triangulated.obj", "spot.mtl", "spot_texture.png"}) fs::copy_file(test::data_path(name), dir / "in" / name);
+    const Outcome r = run("remesh " + file("in/spot_triangulated.obj") + " -o " + file("out/cow.obj") + " -r 48 --report " + file("report.json") + " -q");
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(r.err.empty()) << r.err; // no warning: the library and its texture were found
+    std::ifstream library(dir / "out" / "cow.mtl");
+    std::stringstream text;
+    text << library.rdbuf();
+    EXPECT_NE(text.str().find("newmtl Spot\n"), std::string::npos) << text.str();
+    EXPECT_NE(text.str().find("map_Kd ../in/spot_texture.png\n"), std::string::npos) << text.str();
+    std::vector<std::string> warnings;
+    const TriangleMesh out = read_mesh(file("out/cow.obj"), &warnings);
+    EXPECT_TRUE(warnings.empty());
+    EXPECT_EQ(out.triangle_uvs.size(), out.triangles.size());
+    ASSERT_EQ(out.materials.size(), 1u);
+    EXPECT_TRUE(fs::equivalent(out.materials[0].texture, dir / "in" / "spot_texture.png"));
+    std::ifstream report(file("report.json"));
+    std::stringstream json;
+    json << report.rdbuf();
+    EXPECT_NE(json.str().find("\"attributes\": true"), std::string::npos) << json.str();
+
+    // Broken references: a missing texture is a warning and the run goes on; a texture coordinate index out of
+    // range is refused with the file and line, and nothing is written.
+    fs::remove(dir / "in" / "spot_texture.png");
+    const Outcome warned = run("remesh " + file("in/spot_triangulated.obj") + " -o " + file("out/warned.obj") + " -r 32 -q");
+    EXPECT_EQ(warned.code, 0) << warned.err;
+    EXPECT_NE(warned.err.find("warning: " + file("in/spot.mtl") + ": material 'Spot': texture"), std::string::npos) << warned.err;
+    const std::string bad = write("bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nf 1/1 3/1 2/1\nf 1/1 2/1 4/1\nf 1/1 4/1 3/1\nf 2/1 3/1 4/2\n");
+    const Outcome refused = run("remesh " + bad + " -o " + file("out/bad.obj") + " -q");
+    EXPECT_EQ(refused.code, 2);
+    EXPECT_EQ(lines(refused.err), 1) << refused.err;
+    EXPECT_NE(refused.err.find("bad.obj: line 9: face refers to texture coordinate 2, file has 1"), std::string::npos) << refused.err;
+    EXPECT_FALSE(fs::exists(file("out/bad.obj")));
+}
+
 TEST_F(Cli, CompareReportsJson) {
     const Outcome r = run("compare " + test::data_path("bunny.obj") + " " + test::data_path("bunny.obj") + " --json --samples 1000");
     EXPECT_EQ(r.code, 0) << r.err;

@@ -71,11 +71,20 @@ public:
     void set_halfedge(VertexHandle, HalfedgeHandle) override {}
     void set_normal(VertexHandle, const Vec3f&) override {}
     void set_normal(VertexHandle, const Vec3d&) override {}
-    void set_color(VertexHandle, const Vec3uc&) override {}
-    void set_color(VertexHandle, const Vec4uc&) override {}
-    void set_color(VertexHandle, const Vec3f&) override {}
-    void set_color(VertexHandle, const Vec4f&) override {}
-    void set_texcoord(VertexHandle, const Vec2f&) override {}
+    void set_color(VertexHandle vh, const Vec3uc& c) override { set_color(vh, Vec3f(c[0], c[1], c[2]) / 255.0f); }
+    void set_color(VertexHandle vh, const Vec4uc& c) override { set_color(vh, Vec3f(c[0], c[1], c[2]) / 255.0f); }
+    void set_color(VertexHandle vh, const Vec4f& c) override { set_color(vh, Vec3f(c[0], c[1], c[2])); }
+    void set_color(VertexHandle vh, const Vec3f& c) override {
+        if (!vh.is_valid() || vh.idx() >= int(mesh.vertices.size())) return;
+        mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
+        mesh.colours[std::size_t(vh.idx())] = Eigen::Vector3f(c[0], c[1], c[2]).cwiseMax(0.0f).cwiseMin(1.0f);
+    }
+    /// Per-vertex texture coordinates (PLY's s t): the vertex's own index into uvs.
+    void set_texcoord(VertexHandle vh, const Vec2f& t) override {
+        if (!vh.is_valid() || vh.idx() >= int(mesh.vertices.size())) return;
+        mesh.uvs.resize(mesh.vertices.size(), Eigen::Vector2d::Zero());
+        mesh.uvs[std::size_t(vh.idx())] = Eigen::Vector2d(t[0], t[1]);
+    }
     void set_status(VertexHandle, const Attributes::StatusInfo&) override {}
     void set_next(HalfedgeHandle, HalfedgeHandle) override {}
     void set_face(HalfedgeHandle, FaceHandle) override {}
@@ -132,7 +141,7 @@ bool is_mesh_path(const std::string& path) {
     return ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" || ext == ".om";
 }
 
-TriangleMesh read_mesh(const std::string& path) {
+TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnings) {
     static QuietOpenMesh quiet;
     namespace fs = std::filesystem;
     std::error_code ec;
@@ -143,7 +152,8 @@ TriangleMesh read_mesh(const std::string& path) {
     if (std::ifstream probe(path, std::ios::binary); !probe) throw IOError(path + ": cannot open for reading");
     const auto file_size = fs::file_size(path, ec);
     if (file_size == 0) throw InvalidInput(path + ": file is empty");
-    if (TriangleMesh direct; read_mesh_directly(path, lower_extension(path), file_size, direct)) {
+    std::vector<std::string> ignored;
+    if (TriangleMesh direct; read_mesh_directly(path, lower_extension(path), file_size, direct, warnings ? *warnings : ignored)) {
         if (direct.vertices.empty()) throw InvalidInput(path + ": no vertices");
         if (direct.triangles.empty()) throw InvalidInput(path + ": no faces");
         return direct;
@@ -151,7 +161,7 @@ TriangleMesh read_mesh(const std::string& path) {
     validate_before_openmesh(path, lower_extension(path), file_size);
 
     SoupImporter importer;
-    IO::Options options;
+    IO::Options options(IO::Options::VertexColor | IO::Options::VertexTexCoord);
     if (lower_extension(path) == ".om") {
         // The OM reader rebuilds halfedge connectivity, so it needs a real halfedge mesh behind it.
         OutputMesh om;
@@ -169,7 +179,15 @@ TriangleMesh read_mesh(const std::string& path) {
     if (!importer.first_problem.empty()) throw InvalidInput(path + ": " + importer.first_problem);
     if (importer.mesh.vertices.empty()) throw InvalidInput(path + ": no vertices");
     if (importer.mesh.triangles.empty()) throw InvalidInput(path + ": no faces");
-    return std::move(importer.mesh);
+    TriangleMesh& mesh = importer.mesh;
+    if (!mesh.colours.empty()) mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
+    if (!mesh.uvs.empty()) {
+        mesh.uvs.resize(mesh.vertices.size(), Eigen::Vector2d::Zero());
+        mesh.triangle_uvs = mesh.triangles;
+    }
+    for (std::size_t i = 0; i < mesh.uvs.size(); ++i)
+        if (!mesh.uvs[i].allFinite()) throw InvalidInput(path + ": vertex " + std::to_string(i + 1) + " has a non-finite texture coordinate");
+    return std::move(mesh);
 }
 
 void write_mesh(const TriangleMesh& mesh, const std::string& path) {
@@ -177,7 +195,20 @@ void write_mesh(const TriangleMesh& mesh, const std::string& path) {
     if (!is_mesh_path(path))
         throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
     if (lower_extension(path) != ".om") {
-        const auto chunks = encode_mesh_chunks(mesh, lower_extension(path));
+        std::string library;
+        if (lower_extension(path) == ".obj" && !mesh.materials.empty()) {
+            const std::filesystem::path obj(path);
+            library = obj.stem().string() + ".mtl";
+            const std::string library_path = (obj.parent_path() / library).string();
+            const std::string text = encode_material_library(mesh.materials, obj.parent_path().string());
+            write_atomically(library_path, [&](const std::string& tmp) {
+                std::ofstream out(tmp, std::ios::binary);
+                out << text;
+                out.close();
+                if (!out) throw IOError(library_path + ": writing the material library failed");
+            });
+        }
+        const auto chunks = encode_mesh_chunks(mesh, lower_extension(path), library);
         write_atomically(path, [&](const std::string& tmp) {
             std::ofstream out(tmp, std::ios::binary);
             for (const auto& c : chunks) out.write(c.data(), std::streamsize(c.size()));

@@ -77,14 +77,37 @@ std::string read_whole(const std::string& path, std::uintmax_t size) {
     return text;
 }
 
-TriangleMesh read_obj(const std::string& path, std::string_view text) {
+/// Texture coordinate and material indices of an OBJ's faces, kept only once a face names one.
+struct ObjAttributes {
+    std::vector<std::array<std::int32_t, 3>>& triangle_uvs;
+    std::vector<std::int32_t>& triangle_materials;
+    void uvs_for(std::size_t triangles) {
+        if (triangle_uvs.size() < triangles) triangle_uvs.resize(triangles, {-1, -1, -1});
+    }
+    void materials_for(std::size_t triangles) {
+        if (triangle_materials.size() < triangles) triangle_materials.resize(triangles, -1);
+    }
+};
+
+TriangleMesh read_obj(const std::string& path, std::string_view text, std::vector<std::string>& libraries) {
     TriangleMesh mesh;
+    ObjAttributes attributes{mesh.triangle_uvs, mesh.triangle_materials};
     Lines lines(text);
     std::string_view line;
-    std::int64_t max_index = 0;
-    std::size_t max_index_line = 0;
-    std::vector<std::int32_t> polygon;
+    std::int64_t max_index = 0, max_uv = 0;
+    std::size_t max_index_line = 0, max_uv_line = 0;
+    std::int32_t material = -1;
+    std::unordered_map<std::string, std::int32_t> material_ids;
+    std::vector<std::int32_t> polygon, polygon_uvs;
     auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(lines.number()) + ": " + what); };
+    // An OBJ index (1-based, or negative: counted back from the last one read) as 0-based.
+    auto index_of = [&](std::int64_t index, std::int64_t count, const char* what, std::int64_t& max, std::size_t& max_line) {
+        if (index == 0) bad(std::string("face ") + what + " index 0 (OBJ indices start at 1)");
+        if (index < 0 && index < -count) bad(std::string("face ") + what + " index " + std::to_string(index) + " reaches before the first one");
+        if (index > max) max = index, max_line = lines.number();
+        if (index > std::int64_t(std::numeric_limits<std::int32_t>::max())) bad(std::string("face ") + what + " index " + std::to_string(index) + " is out of range");
+        return std::int32_t(index < 0 ? count + index : index - 1);
+    };
     while (lines.next(line)) {
         const std::string_view keyword = token(line);
         if (keyword == "v") {
@@ -93,28 +116,70 @@ TriangleMesh read_obj(const std::string& path, std::string_view text) {
                 if (!parse_double(token(line), p[a])) bad("vertex " + std::to_string(mesh.vertices.size() + 1) + " needs three numbers");
                 if (!std::isfinite(p[a])) bad("vertex " + std::to_string(mesh.vertices.size() + 1) + " has a non-finite coordinate");
             }
+            // "v x y z r g b": a vertex colour (a common extension; 0-1, or 0-255 when any is above 1).
+            Eigen::Vector3d rgb;
+            std::string_view rest = line;
+            if (const auto t = token(rest); !t.empty() && parse_double(t, rgb[0]) && parse_double(token(rest), rgb[1]) && parse_double(token(rest), rgb[2])) {
+                if (!rgb.allFinite() || rgb.minCoeff() < 0) bad("vertex " + std::to_string(mesh.vertices.size() + 1) + " has a colour outside [0, 1] and [0, 255]");
+                if (rgb.maxCoeff() > 1) rgb /= 255.0;
+                if (rgb.maxCoeff() > 1) bad("vertex " + std::to_string(mesh.vertices.size() + 1) + " has a colour outside [0, 1] and [0, 255]");
+                mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
+                mesh.colours.push_back(rgb.cast<float>());
+            }
             mesh.vertices.push_back(p);
+        } else if (keyword == "vt") {
+            Eigen::Vector2d uv;
+            for (int a = 0; a < 2; ++a)
+                if (!parse_double(token(line), uv[a]) || !std::isfinite(uv[a])) bad("texture coordinate " + std::to_string(mesh.uvs.size() + 1) + " needs two finite numbers");
+            mesh.uvs.push_back(uv);
         } else if (keyword == "f") {
             polygon.clear();
+            polygon_uvs.clear();
             for (std::string_view t = token(line); !t.empty(); t = token(line)) {
                 std::int64_t index = 0;
                 std::string_view rest;
                 if (!parse_leading_integer(t, index, rest) || (!rest.empty() && rest[0] != '/'))
                     bad("face vertex '" + std::string(t.substr(0, 40)) + "' does not start with a vertex index");
-                if (index == 0) bad("face vertex index 0 (OBJ indices start at 1)");
-                const auto vertices = std::int64_t(mesh.vertices.size());
-                if (index < 0 && index < -vertices) bad("face vertex index " + std::to_string(index) + " reaches before the first vertex");
-                if (index > max_index) max_index = index, max_index_line = lines.number();
-                if (index > std::int64_t(std::numeric_limits<std::int32_t>::max())) bad("face vertex index " + std::to_string(index) + " is out of range");
-                polygon.push_back(std::int32_t(index < 0 ? vertices + index : index - 1));
+                polygon.push_back(index_of(index, std::int64_t(mesh.vertices.size()), "vertex", max_index, max_index_line));
+                if (rest.size() > 1 && rest[1] != '/') { // v/vt or v/vt/vn
+                    std::string_view after;
+                    if (!parse_leading_integer(rest.substr(1), index, after) || (!after.empty() && after[0] != '/'))
+                        bad("face vertex '" + std::string(t.substr(0, 40)) + "' has a malformed texture coordinate index");
+                    polygon_uvs.push_back(index_of(index, std::int64_t(mesh.uvs.size()), "texture coordinate", max_uv, max_uv_line));
+                }
             }
             if (polygon.size() < 3) bad("face has " + std::to_string(polygon.size()) + " vertices, expected at least 3");
-            for (std::size_t c = 1; c + 1 < polygon.size(); ++c) mesh.triangles.push_back({polygon[0], polygon[c], polygon[c + 1]});
+            const bool uvs = polygon_uvs.size() == polygon.size(); // a face that names them for some corners only has none
+            for (std::size_t c = 1; c + 1 < polygon.size(); ++c) {
+                mesh.triangles.push_back({polygon[0], polygon[c], polygon[c + 1]});
+                if (uvs) {
+                    attributes.uvs_for(mesh.triangles.size());
+                    mesh.triangle_uvs.back() = {polygon_uvs[0], polygon_uvs[c], polygon_uvs[c + 1]};
+                }
+                if (material >= 0) {
+                    attributes.materials_for(mesh.triangles.size());
+                    mesh.triangle_materials.back() = material;
+                }
+            }
+        } else if (keyword == "usemtl") {
+            std::string name(token(line));
+            const auto [it, added] = material_ids.try_emplace(name, std::int32_t(mesh.materials.size()));
+            if (added) mesh.materials.push_back(Material{name});
+            material = it->second;
+        } else if (keyword == "mtllib") {
+            for (std::string_view t = token(line); !t.empty(); t = token(line)) libraries.emplace_back(t);
         }
     }
     if (std::uint64_t(max_index) > mesh.vertices.size())
         throw InvalidInput(path + ": line " + std::to_string(max_index_line) + ": face refers to vertex " + std::to_string(max_index) + ", file has " +
                            std::to_string(mesh.vertices.size()) + " vertices");
+    if (std::uint64_t(max_uv) > mesh.uvs.size())
+        throw InvalidInput(path + ": line " + std::to_string(max_uv_line) + ": face refers to texture coordinate " + std::to_string(max_uv) + ", file has " +
+                           std::to_string(mesh.uvs.size()));
+    if (!mesh.colours.empty()) mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
+    if (!mesh.triangle_uvs.empty()) attributes.uvs_for(mesh.triangles.size());
+    if (!mesh.triangle_materials.empty()) attributes.materials_for(mesh.triangles.size());
+    if (mesh.triangle_uvs.empty()) mesh.uvs.clear();
     return mesh;
 }
 
@@ -210,9 +275,11 @@ TriangleMesh read_binary_stl(const std::string& path, std::string_view bytes) {
 
 } // namespace
 
-bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh) {
+bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh, std::vector<std::string>& warnings) {
     if (ext == ".obj") {
-        mesh = read_obj(path, read_whole(path, file_size));
+        std::vector<std::string> libraries;
+        mesh = read_obj(path, read_whole(path, file_size), libraries);
+        if (!mesh.materials.empty()) fill_materials(path, libraries, mesh.materials, warnings);
         return true;
     }
     if (ext == ".stl" || ext == ".off") {

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include <voxwarp/triangle_mesh.h>
 
@@ -15,7 +16,12 @@ std::string read_head(const std::string& path, std::uintmax_t file_size);
 
 /// Read a .obj, binary .stl or plain ASCII OFF file in one validating pass of voxwarp's own (mesh_read.cpp);
 /// false for the formats and variants left to OpenMesh. @throw InvalidInput naming the file and what is wrong.
-bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh);
+/// Problems that do not stop the reading (a missing material library or texture) go to `warnings`.
+bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh, std::vector<std::string>& warnings);
+
+/// Fill `materials` (named by an OBJ's usemtl) from the OBJ's material libraries (mtllib names, relative to the OBJ's
+/// folder). A library or texture that cannot be found, or a material no library defines, is a warning.
+void fill_materials(const std::string& obj_path, const std::vector<std::string>& libraries, std::vector<Material>& materials, std::vector<std::string>& warnings);
 
 /// Dispatch on the (lower-case) extension `ext`; formats without known reader problems pass through.
 void validate_before_openmesh(const std::string& path, const std::string& ext, std::uintmax_t file_size);

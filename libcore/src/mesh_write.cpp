@@ -7,7 +7,9 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <charconv>
+#include <cmath>
 #include <cstring>
 #include <functional>
 
@@ -81,10 +83,50 @@ void faces_text(const std::vector<std::array<std::int32_t, N>>& faces, std::stri
     });
 }
 
-Chunks obj(const TriangleMesh& mesh) {
-    Chunks chunks{"# voxwarp\n"};
-    vertices_text(mesh, "v ", chunks);
-    faces_text(mesh.triangles, "f ", 1, chunks);
+Chunks obj(const TriangleMesh& mesh, const std::string& material_library) {
+    Chunks chunks{"# voxwarp\n" + (mesh.materials.empty() || material_library.empty() ? std::string() : "mtllib " + material_library + "\n")};
+    if (mesh.colours.empty()) {
+        vertices_text(mesh, "v ", chunks);
+    } else {
+        encode_chunks(mesh.vertices.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
+            TextChunk t(s, (e - b) * (2 + 6 * 25 + 6));
+            for (std::size_t i = b; i < e; ++i) {
+                const auto& v = mesh.vertices[i];
+                const auto& c = mesh.colours[i];
+                t.text("v ");
+                t.number(v.x()), t.put(' '), t.number(v.y()), t.put(' '), t.number(v.z()), t.put(' ');
+                t.number(c.x()), t.put(' '), t.number(c.y()), t.put(' '), t.number(c.z()), t.put('\n');
+            }
+        });
+    }
+    if (mesh.triangle_uvs.empty() && mesh.triangle_materials.empty()) {
+        faces_text(mesh.triangles, "f ", 1, chunks);
+    } else {
+        encode_chunks(mesh.uvs.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
+            TextChunk t(s, (e - b) * (3 + 2 * 25 + 2));
+            for (std::size_t i = b; i < e; ++i) {
+                t.text("vt "), t.number(mesh.uvs[i].x()), t.put(' '), t.number(mesh.uvs[i].y()), t.put('\n');
+            }
+        });
+        auto material = [&](std::size_t f) { return mesh.triangle_materials.empty() ? -1 : mesh.triangle_materials[f]; };
+        std::size_t longest_name = 0;
+        for (const auto& m : mesh.materials) longest_name = std::max(longest_name, m.name.size());
+        encode_chunks(mesh.triangles.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
+            TextChunk t(s, (e - b) * (2 + 3 * 24 + 8 + longest_name + 1));
+            for (std::size_t f = b; f < e; ++f) {
+                // A material statement where the material changes, and before the first face that has one.
+                if (material(f) >= 0 && (f == 0 || material(f) != material(f - 1)))
+                    t.text("usemtl "), t.text(mesh.materials[std::size_t(material(f))].name), t.put('\n');
+                const bool uvs = !mesh.triangle_uvs.empty() && mesh.triangle_uvs[f][0] >= 0 && mesh.triangle_uvs[f][1] >= 0 && mesh.triangle_uvs[f][2] >= 0;
+                t.text("f ");
+                for (std::size_t c = 0; c < 3; ++c) {
+                    t.integer(std::int64_t(mesh.triangles[f][c]) + 1);
+                    if (uvs) t.put('/'), t.integer(std::int64_t(mesh.triangle_uvs[f][c]) + 1);
+                    t.put(c < 2 ? ' ' : '\n');
+                }
+            }
+        });
+    }
     faces_text(mesh.quads, "f ", 1, chunks);
     return chunks;
 }
@@ -122,14 +164,66 @@ Chunks stl(const TriangleMesh& mesh) {
     return chunks;
 }
 
-Chunks ply(const TriangleMesh& mesh) {
-    Chunks chunks{"ply\nformat binary_little_endian 1.0\ncomment voxwarp\nelement vertex " + std::to_string(mesh.vertices.size()) +
-                  "\nproperty float x\nproperty float y\nproperty float z\nelement face " + std::to_string(mesh.face_count()) +
+/// Per-vertex texture coordinates for PLY: a vertex whose corners name different ones (a seam) is written once per
+/// texture coordinate. `vertex_of[i]`: the mesh vertex that written vertex i copies; `uv_of[i]`: its texture
+/// coordinate (-1: none); the faces index written vertices.
+struct SeamSplit {
+    std::vector<std::int32_t> vertex_of, uv_of;
+    std::vector<std::array<std::int32_t, 3>> triangles;
+};
+
+SeamSplit split_at_seams(const TriangleMesh& mesh) {
+    SeamSplit split;
+    split.vertex_of.resize(mesh.vertices.size());
+    split.uv_of.assign(mesh.vertices.size(), -1);
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) split.vertex_of[v] = std::int32_t(v);
+    std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> copies(mesh.vertices.size()); // (uv, written vertex) beyond the first
+    split.triangles = mesh.triangles;
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c) {
+            const std::int32_t v = mesh.triangles[f][c], uv = mesh.triangle_uvs[f][c];
+            if (uv < 0) continue;
+            if (split.uv_of[std::size_t(v)] < 0 || split.uv_of[std::size_t(v)] == uv) {
+                split.uv_of[std::size_t(v)] = uv;
+                continue;
+            }
+            std::int32_t written = -1;
+            for (const auto& [u, w] : copies[std::size_t(v)])
+                if (u == uv) written = w;
+            if (written < 0) {
+                written = std::int32_t(split.vertex_of.size());
+                split.vertex_of.push_back(v);
+                split.uv_of.push_back(uv);
+                copies[std::size_t(v)].emplace_back(uv, written);
+            }
+            split.triangles[f][c] = written;
+        }
+    return split;
+}
+
+Chunks ply(const TriangleMesh& mesh, bool attributes) {
+    const bool uvs = attributes && !mesh.triangle_uvs.empty(), colours = attributes && !mesh.colours.empty();
+    SeamSplit split;
+    if (uvs) split = split_at_seams(mesh);
+    const std::size_t nv = uvs ? split.vertex_of.size() : mesh.vertices.size();
+    Chunks chunks{"ply\nformat binary_little_endian 1.0\ncomment voxwarp\nelement vertex " + std::to_string(nv) +
+                  "\nproperty float x\nproperty float y\nproperty float z\n" + (uvs ? "property float s\nproperty float t\n" : "") +
+                  (colours ? "property uchar red\nproperty uchar green\nproperty uchar blue\n" : "") + "element face " + std::to_string(mesh.face_count()) +
                   "\nproperty list uchar int vertex_indices\nend_header\n"};
-    encode_chunks(mesh.vertices.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
-        s.resize((e - b) * 12);
+    const std::size_t stride = 12 + (uvs ? 8 : 0) + (colours ? 3 : 0);
+    encode_chunks(nv, chunks, [&](std::size_t b, std::size_t e, std::string& s) {
+        s.resize((e - b) * stride);
         char* at = s.data();
-        for (std::size_t i = b; i < e; ++i) at = put(put(put(at, float(mesh.vertices[i].x())), float(mesh.vertices[i].y())), float(mesh.vertices[i].z()));
+        for (std::size_t i = b; i < e; ++i) {
+            const std::size_t v = uvs ? std::size_t(split.vertex_of[i]) : i;
+            at = put(put(put(at, float(mesh.vertices[v].x())), float(mesh.vertices[v].y())), float(mesh.vertices[v].z()));
+            if (uvs) {
+                const Eigen::Vector2d uv = split.uv_of[i] >= 0 ? mesh.uvs[std::size_t(split.uv_of[i])] : Eigen::Vector2d::Zero();
+                at = put(put(at, float(uv.x())), float(uv.y()));
+            }
+            if (colours)
+                for (int a = 0; a < 3; ++a) at = put(at, std::uint8_t(std::lround(std::clamp(mesh.colours[v][a], 0.0f, 1.0f) * 255.0f)));
+        }
     });
     auto faces = [&](const auto& list, std::uint8_t corners) {
         encode_chunks(list.size(), chunks, [&, corners](std::size_t b, std::size_t e, std::string& s) {
@@ -141,24 +235,24 @@ Chunks ply(const TriangleMesh& mesh) {
             }
         });
     };
-    faces(mesh.triangles, 3);
+    faces(uvs ? split.triangles : mesh.triangles, 3);
     faces(mesh.quads, 4);
     return chunks;
 }
 
 } // namespace mesh_write_internal
 
-std::vector<std::string> encode_mesh_chunks(const TriangleMesh& mesh, const std::string& extension) {
+std::vector<std::string> encode_mesh_chunks(const TriangleMesh& mesh, const std::string& extension, const std::string& material_library) {
     using namespace mesh_write_internal;
-    if (extension == ".ply") return ply(mesh);
+    if (extension == ".ply") return ply(mesh, true);
     if (extension == ".stl") return stl(mesh);
-    if (extension == ".obj") return obj(mesh);
+    if (extension == ".obj") return obj(mesh, material_library);
     if (extension == ".off") return off(mesh);
     throw InvalidInput("no direct encoder for '" + extension + "' meshes");
 }
 
-std::string encode_mesh(const TriangleMesh& mesh, const std::string& extension) {
-    const auto chunks = encode_mesh_chunks(mesh, extension);
+std::string encode_mesh(const TriangleMesh& mesh, const std::string& extension, const std::string& material_library) {
+    const auto chunks = encode_mesh_chunks(mesh, extension, material_library);
     std::size_t size = 0;
     for (const auto& c : chunks) size += c.size();
     std::string out;
@@ -167,6 +261,11 @@ std::string encode_mesh(const TriangleMesh& mesh, const std::string& extension) 
     return out;
 }
 
-std::string encode_ply(const TriangleMesh& mesh) { return encode_mesh(mesh, ".ply"); }
+std::string encode_ply(const TriangleMesh& mesh) {
+    const auto chunks = mesh_write_internal::ply(mesh, false);
+    std::string out;
+    for (const auto& c : chunks) out += c;
+    return out;
+}
 
 } // namespace voxwarp

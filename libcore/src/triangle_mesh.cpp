@@ -8,6 +8,31 @@
 
 namespace voxwarp {
 
+void check_attributes(const TriangleMesh& mesh, const std::string& source) {
+    const std::size_t nt = mesh.triangles.size();
+    auto sized = [&](std::size_t size, std::size_t expected, const char* what, const char* per) {
+        if (size != 0 && size != expected)
+            throw InvalidInput(source + ": " + what + " has " + std::to_string(size) + " entries, expected one per " + per + " (" + std::to_string(expected) + ")");
+    };
+    sized(mesh.triangle_uvs.size(), nt, "triangle_uvs", "triangle");
+    sized(mesh.triangle_materials.size(), nt, "triangle_materials", "triangle");
+    sized(mesh.colours.size(), mesh.vertices.size(), "colours", "vertex");
+    if (mesh.has_attributes() && !mesh.quads.empty()) throw InvalidInput(source + ": a mesh with quads carries no attributes; triangulate it first");
+    for (std::size_t i = 0; i < mesh.uvs.size(); ++i)
+        if (!mesh.uvs[i].allFinite()) throw InvalidInput(source + ": texture coordinate " + std::to_string(i) + " is not finite");
+    for (std::size_t t = 0; t < mesh.triangle_uvs.size(); ++t)
+        for (const auto i : mesh.triangle_uvs[t])
+            if (i < -1 || i >= std::int64_t(mesh.uvs.size()))
+                throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to texture coordinate " + std::to_string(i) + ", the mesh has " +
+                                   std::to_string(mesh.uvs.size()));
+    for (std::size_t t = 0; t < mesh.triangle_materials.size(); ++t)
+        if (mesh.triangle_materials[t] < -1 || mesh.triangle_materials[t] >= std::int64_t(mesh.materials.size()))
+            throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to material " + std::to_string(mesh.triangle_materials[t]) + ", the mesh has " +
+                               std::to_string(mesh.materials.size()));
+    for (std::size_t i = 0; i < mesh.colours.size(); ++i)
+        if (!mesh.colours[i].allFinite()) throw InvalidInput(source + ": colour of vertex " + std::to_string(i) + " is not finite");
+}
+
 void check_mesh(const TriangleMesh& mesh, const std::string& source) {
     if (mesh.vertices.empty()) throw InvalidInput(source + ": no vertices");
     if (mesh.face_count() == 0) throw InvalidInput(source + ": no faces");
@@ -22,6 +47,7 @@ void check_mesh(const TriangleMesh& mesh, const std::string& source) {
     };
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) check_face(f, mesh.triangles[f]);
     for (std::size_t f = 0; f < mesh.quads.size(); ++f) check_face(mesh.triangles.size() + f, mesh.quads[f]);
+    check_attributes(mesh, source);
     TriangleMesh storage;
     for (const auto& t : all_triangles(mesh, storage))
         if ((mesh.vertices[std::size_t(t[1])] - mesh.vertices[std::size_t(t[0])]).cross(mesh.vertices[std::size_t(t[2])] - mesh.vertices[std::size_t(t[0])]).squaredNorm() > 0)
@@ -44,6 +70,17 @@ TriangleMesh TriangleMesh::triangulated() const {
             out.triangles.push_back({q[0], q[1], q[3]});
             out.triangles.push_back({q[1], q[2], q[3]});
         }
+    }
+    out.uvs = uvs;
+    out.colours = colours;
+    out.materials = materials;
+    if (!triangle_uvs.empty()) {
+        out.triangle_uvs = triangle_uvs;
+        out.triangle_uvs.resize(out.triangles.size(), {-1, -1, -1});
+    }
+    if (!triangle_materials.empty()) {
+        out.triangle_materials = triangle_materials;
+        out.triangle_materials.resize(out.triangles.size(), -1);
     }
     return out;
 }

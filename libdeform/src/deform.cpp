@@ -5,6 +5,7 @@
 #include <voxwarp/resources.h>
 #include <voxwarp/rigid.h>
 #include <voxwarp/snap.h>
+#include <voxwarp/transfer.h>
 #include <voxwarp/surface_distance.h>
 
 #include "thin_parts.h"
@@ -12,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <tuple>
 
 namespace voxwarp {
@@ -300,17 +302,32 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     eo.progress = options.progress;
     if (sharpen && !features.empty()) eo.feature_surface = &features;
     TriangleMesh out = extract(voxmap, eo);
+    const SnapOptions so{.voxel_size = voxmap.voxel_size()};
+    std::unique_ptr<SourceSurface> own_surface; // the input indexed once for snapping and transfer both
+    auto input_surface = [&]() -> const SourceSurface& {
+        if (!surface && !own_surface) own_surface = std::make_unique<SourceSurface>(mesh);
+        return surface ? *surface : *own_surface;
+    };
+    auto find = [&](const TriangleMesh& m) { return find_sources(m, input_surface(), steps, so); };
+    std::vector<SourcePoint> sources;
     if (options.snap && out.face_count() > 0) {
         const auto ts = Clock::now();
-        const SnapOptions so{.voxel_size = voxmap.voxel_size()};
-        const auto sources = surface ? find_sources(out, *surface, steps, so) : find_sources(out, mesh, steps, so);
+        sources = find(out);
         const SnapReport sr = snap_to_sources(out, mesh, steps, sources, so);
         report.snap = true;
         report.snapped_vertices = sr.snapped;
         report.unsnapped_vertices = sr.unsnapped;
         report.seconds_snap = seconds_since(ts);
     }
-    if (options.target_faces > 0) out = decimate(out, options.target_faces);
+    if (options.target_faces > 0) out = decimate(out, options.target_faces), sources.clear();
+    if (mesh.has_attributes() && out.face_count() > 0) {
+        const auto tt = Clock::now();
+        if (!out.quads.empty()) out = out.triangulated(), sources.clear();
+        if (sources.empty()) sources = find(out);
+        report.triangles_across_charts = transfer_attributes(out, input_surface(), sources).triangles_across_charts;
+        report.attributes = true;
+        report.seconds_transfer = seconds_since(tt);
+    }
     report.seconds_extract = seconds_since(t);
     if (out.face_count() == 0) {
         const auto warnings = deform_warnings(report); // the thin parts' come last

@@ -37,7 +37,7 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
     j["volume_change_percent"] = change_percent(r.volume_before, r.volume_after);
     j["seconds"] = {{"total", r.seconds_total}, {"read", r.seconds_read},       {"voxelize", r.seconds_voxelize}, {"solve", r.seconds_solve},
                     {"warp", r.seconds_warp},   {"extract", r.seconds_extract}, {"snap", r.seconds_snap},
-                    {"write", r.seconds_write}};
+                    {"transfer", r.seconds_transfer}, {"write", r.seconds_write}};
     j["peak_resident_bytes"] = peak_resident_bytes();
     j["output_vertices"] = r.output_vertices;
     j["output_faces"] = r.output_faces;
@@ -45,6 +45,8 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
         j["snap"] = r.snap;
         j["snapped_vertices"] = r.snapped_vertices;
         j["unsnapped_vertices"] = r.unsnapped_vertices;
+        j["attributes"] = r.attributes;
+        if (r.attributes) j["triangles_across_charts"] = r.triangles_across_charts;
     }
     j["edits"] = nlohmann::json::array();
     for (const auto& e : r.edits) {

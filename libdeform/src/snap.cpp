@@ -229,6 +229,18 @@ SourceSurface::SourceSurface(const TriangleMesh& input) : impl_(std::make_unique
 SourceSurface::~SourceSurface() = default;
 const TriangleMesh& SourceSurface::mesh() const { return impl_->input; }
 
+SourcePoint SourceSurface::nearest(const Eigen::Vector3d& point, const Eigen::Vector3d& normal, double reach) const {
+    std::optional<Impl::Hint> hint;
+    if (!normal.isZero()) return impl_->nearest(point, normal, reach, hint, 0);
+    const auto hit = impl_->tree.closest_point_and_primitive(Impl::Point(point.x(), point.y(), point.z()));
+    SourcePoint s;
+    if ((Eigen::Vector3d(hit.first.x(), hit.first.y(), hit.first.z()) - point).norm() > reach) return s;
+    s.face = impl_->face_of[std::size_t(hit.second - impl_->triangles.begin())];
+    const auto& t = impl_->faces[std::size_t(s.face)];
+    s.barycentric = snap_internal::closest_barycentric(point, impl_->V[t[0]], impl_->V[t[1]], impl_->V[t[2]]);
+    return s;
+}
+
 namespace snap_internal {
 
 /// Per vertex, how far the nearest other sheet of the surface is, looking no farther than `radius` (+infinity

@@ -1,8 +1,11 @@
 /// @file triangle_mesh.h
-/// @brief A plain indexed polygon mesh (triangles and optional quads): voxwarp's currency between libraries.
+/// @brief A plain indexed polygon mesh (triangles and optional quads) with its attributes (texture coordinates,
+///        vertex colours, materials): voxwarp's currency between libraries.
 ///
 /// Positions are in world units. Faces index into `vertices` (0-based) and are counter-clockwise seen from
 /// outside. The struct makes no manifoldness promise: a mesh read from a scan may be a triangle soup.
+/// Attributes belong to triangles (a mesh with quads has none): each attribute array is either empty (absent) or
+/// sized as documented.
 #pragma once
 
 #include <Eigen/Core>
@@ -15,10 +18,30 @@
 
 namespace voxwarp {
 
+/// A surface material as an OBJ material library (.mtl) names it. voxwarp does not shade with it; it carries it
+/// from input to output, texture paths kept valid.
+struct Material {
+    std::string name;
+    Eigen::Vector3d diffuse{0.8, 0.8, 0.8}; ///< Kd, RGB in [0, 1]
+    std::string texture;                    ///< map_Kd: the diffuse texture's path, usable from the current directory; empty: none
+    /// The material's other .mtl statements as read ("Ks 0 0 0", "map_Bump -bm 0.5 bump.png"), written back as they
+    /// are, except that a texture map's file (the last word of a map_*, bump, disp, decal or norm line) is a path
+    /// usable from the current directory, like `texture`.
+    std::vector<std::string> statements;
+};
+
 struct TriangleMesh {
     std::vector<Eigen::Vector3d> vertices;          ///< #V positions, world units
     std::vector<std::array<std::int32_t, 3>> triangles; ///< #T vertex index triples
     std::vector<std::array<std::int32_t, 4>> quads;     ///< #Q vertex index quadruples (extraction only)
+
+    std::vector<Eigen::Vector2d> uvs;                      ///< texture coordinates (OBJ's vt), shared by corners that index them
+    std::vector<std::array<std::int32_t, 3>> triangle_uvs; ///< #T or empty: each triangle's corners' indices into uvs (-1: none)
+    std::vector<Eigen::Vector3f> colours;                  ///< #V or empty: vertex colours, RGB in [0, 1]
+    std::vector<std::int32_t> triangle_materials;          ///< #T or empty: each triangle's index into materials (-1: none)
+    std::vector<Material> materials;
+
+    bool has_attributes() const { return !triangle_uvs.empty() || !colours.empty() || !triangle_materials.empty(); }
 
     std::size_t face_count() const { return triangles.size() + quads.size(); }
     /// The same surface with every quad split into two triangles (along its shorter diagonal).
@@ -61,6 +84,8 @@ MeshTopology topology(const TriangleMesh& mesh);
 /// @throw InvalidInput whose message starts with `source` and says what is wrong (e.g. "F: face 12 refers to vertex
 ///        4001, the mesh has 1839 vertices").
 void check_mesh(const TriangleMesh& mesh, const std::string& source);
+/// The attribute part of check_mesh: array sizes, indices within uvs and materials, finite values.
+void check_attributes(const TriangleMesh& mesh, const std::string& source);
 
 /// Signed volume enclosed by a closed, outward-oriented mesh (divergence theorem), world units cubed.
 double enclosed_volume(const TriangleMesh& mesh);

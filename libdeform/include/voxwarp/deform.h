@@ -90,6 +90,9 @@ struct DeformReport {
     bool snap = false;                ///< whether output vertices were snapped onto the exact warped input
     std::size_t snapped_vertices = 0, unsnapped_vertices = 0; ///< with snap: vertices moved, and left as extracted
     double seconds_snap = 0;          ///< finding source points and snapping (part of seconds_extract)
+    bool attributes = false;          ///< whether the input's texture coordinates, colours or materials were carried (transfer.h)
+    std::size_t triangles_across_charts = 0; ///< with attributes: output triangles straddling a UV seam (each kept in one chart)
+    double seconds_transfer = 0;      ///< carrying attributes, source points included when snapping did not find them (part of seconds_extract)
     std::vector<ThinPart> thin_parts; ///< what the voxmap lost (mesh input, volume mode), largest first, at most 16
 };
 

@@ -52,6 +52,9 @@ public:
     SourceSurface(const SourceSurface&) = delete;
     SourceSurface& operator=(const SourceSurface&) = delete;
     const TriangleMesh& mesh() const;
+    /// The point of the input surface nearest to `point` (input frame) within `reach`, on a face whose normal has a
+    /// positive dot product with `normal` (any face when `normal` is zero); face -1 when there is none.
+    SourcePoint nearest(const Eigen::Vector3d& point, const Eigen::Vector3d& normal, double reach) const;
     struct Impl;
     const Impl& impl() const { return *impl_; }
 

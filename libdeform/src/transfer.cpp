@@ -1,0 +1,301 @@
+#include <voxwarp/errors.h>
+#include <voxwarp/transfer.h>
+#include <voxwarp_internal/geometry.h>
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <deque>
+#include <limits>
+#include <unordered_map>
+
+namespace voxwarp {
+
+namespace {
+
+/// Charts of the input: triangles joined across each edge whose two sides have the same material and the same
+/// texture coordinates at both ends (or none on both sides).
+std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
+    const auto& tris = input.triangles;
+    const bool uvs = !input.triangle_uvs.empty(), materials = !input.triangle_materials.empty();
+    auto uv = [&](std::size_t t, std::size_t c) { return uvs ? input.triangle_uvs[t][c] : -1; };
+    auto same_uv = [&](std::int32_t a, std::int32_t b) { return a == b || (a >= 0 && b >= 0 && input.uvs[std::size_t(a)] == input.uvs[std::size_t(b)]); };
+    auto material = [&](std::size_t t) { return materials ? input.triangle_materials[t] : -1; };
+    internal::DisjointSets sets(tris.size());
+    struct Side { // the first triangle seen on an edge, and its texture coordinates at the edge's lower and higher vertex
+        std::size_t triangle;
+        std::int32_t uv_low, uv_high;
+    };
+    std::unordered_map<std::uint64_t, Side> first;
+    first.reserve(tris.size() * 2);
+    for (std::size_t t = 0; t < tris.size(); ++t)
+        for (std::size_t c = 0; c < 3; ++c) {
+            const std::size_t d = (c + 1) % 3;
+            std::int32_t a = tris[t][c], b = tris[t][d], ua = uv(t, c), ub = uv(t, d);
+            if (a > b) std::swap(a, b), std::swap(ua, ub);
+            const std::uint64_t key = (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
+            const auto [it, added] = first.try_emplace(key, Side{t, ua, ub});
+            const Side& s = it->second;
+            if (!added && material(s.triangle) == material(t) && same_uv(s.uv_low, ua) && same_uv(s.uv_high, ub)) sets.join(t, s.triangle);
+        }
+    std::vector<std::int32_t> chart(tris.size());
+    std::unordered_map<std::size_t, std::int32_t> ids;
+    for (std::size_t t = 0; t < tris.size(); ++t) chart[t] = ids.try_emplace(sets.find(t), std::int32_t(ids.size())).first->second;
+    return chart;
+}
+
+/// Barycentric coordinates of `p` against triangle (a, b, c) in its plane (p projected onto it), unclamped: outside
+/// the triangle they continue its affine map.
+Eigen::Vector3d barycentric_in_plane(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const Eigen::Vector3d e1 = b - a, e2 = c - a, d = p - a;
+    const double g11 = e1.dot(e1), g12 = e1.dot(e2), g22 = e2.dot(e2), det = g11 * g22 - g12 * g12;
+    if (!(std::abs(det) > 1e-300)) return Eigen::Vector3d(1, 0, 0);
+    const double r1 = e1.dot(d), r2 = e2.dot(d);
+    const double v = (g22 * r1 - g12 * r2) / det, w = (g11 * r2 - g12 * r1) / det;
+    return Eigen::Vector3d(1 - v - w, v, w);
+}
+
+} // namespace
+
+TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& surface, const std::vector<SourcePoint>& sources) {
+    const TriangleMesh& input = surface.mesh();
+    if (!output.quads.empty()) throw InvalidInput("transfer_attributes: the output has quads; triangulate it first");
+    if (!input.quads.empty()) throw InvalidInput("transfer_attributes: the input has quads");
+    if (sources.size() != output.vertices.size())
+        throw InvalidInput("transfer_attributes: " + std::to_string(sources.size()) + " sources for " + std::to_string(output.vertices.size()) + " vertices");
+    TransferReport report;
+    output.uvs.clear(), output.triangle_uvs.clear(), output.colours.clear(), output.triangle_materials.clear();
+    output.materials = input.materials;
+    if (!input.has_attributes()) return report;
+    const auto& in_tris = input.triangles;
+    const auto& V = input.vertices;
+
+    // A vertex without a source borrows its nearest neighbour's (breadth first over the output's edges).
+    std::vector<SourcePoint> source = sources;
+    std::deque<std::int32_t> queue;
+    for (std::size_t v = 0; v < source.size(); ++v) {
+        if (source[v].face >= std::int32_t(in_tris.size())) throw InvalidInput("transfer_attributes: vertex " + std::to_string(v) + "'s source face is not on the input");
+        if (source[v].face >= 0) queue.push_back(std::int32_t(v));
+        else ++report.vertices_without_source;
+    }
+    if (report.vertices_without_source > 0) {
+        std::vector<std::vector<std::int32_t>> neighbours(output.vertices.size());
+        for (const auto& t : output.triangles)
+            for (std::size_t c = 0; c < 3; ++c) {
+                const auto a = t[c], b = t[(c + 1) % 3];
+                neighbours[std::size_t(a)].push_back(b), neighbours[std::size_t(b)].push_back(a);
+            }
+        while (!queue.empty()) {
+            const auto v = queue.front();
+            queue.pop_front();
+            for (const auto n : neighbours[std::size_t(v)])
+                if (source[std::size_t(n)].face < 0) source[std::size_t(n)] = source[std::size_t(v)], queue.push_back(n);
+        }
+    }
+    auto point_of = [&](const SourcePoint& s) {
+        const auto& t = in_tris[std::size_t(s.face)];
+        return Eigen::Vector3d(s.barycentric[0] * V[std::size_t(t[0])] + s.barycentric[1] * V[std::size_t(t[1])] + s.barycentric[2] * V[std::size_t(t[2])]);
+    };
+    auto normal_of = [&](std::int32_t f) {
+        const auto& t = in_tris[std::size_t(f)];
+        const Eigen::Vector3d n = (V[std::size_t(t[1])] - V[std::size_t(t[0])]).cross(V[std::size_t(t[2])] - V[std::size_t(t[0])]);
+        return n.norm() > 0 ? Eigen::Vector3d(n.normalized()) : Eigen::Vector3d::Zero();
+    };
+
+    const std::vector<std::int32_t> chart = charts_of(input);
+    std::vector<std::int32_t> chart_material;
+    if (!input.triangle_materials.empty()) {
+        chart_material.assign(in_tris.size(), -1);
+        for (std::size_t t = 0; t < in_tris.size(); ++t) chart_material[std::size_t(chart[t])] = input.triangle_materials[t];
+    }
+
+    // Each vertex's source point seen from every chart it touches: its own face's, and, where the point lies on an
+    // edge or a corner of that face (on a seam, as snapping leaves vertices there), the faces across it.
+    std::unordered_map<std::uint64_t, std::vector<std::int32_t>> edge_faces;
+    std::vector<std::vector<std::int32_t>> vertex_faces(V.size());
+    auto edge_key = [](std::int32_t a, std::int32_t b) { return (std::uint64_t(std::uint32_t(std::min(a, b))) << 32) | std::uint32_t(std::max(a, b)); };
+    for (std::size_t f = 0; f < in_tris.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c) {
+            edge_faces[edge_key(in_tris[f][c], in_tris[f][(c + 1) % 3])].push_back(std::int32_t(f));
+            vertex_faces[std::size_t(in_tris[f][c])].push_back(std::int32_t(f));
+        }
+    auto in_face = [&](const Eigen::Vector3d& p, std::int32_t g) {
+        const auto& t = in_tris[std::size_t(g)];
+        return SourcePoint{g, barycentric_in_plane(p, V[std::size_t(t[0])], V[std::size_t(t[1])], V[std::size_t(t[2])])};
+    };
+    std::vector<std::vector<SourcePoint>> sides(output.vertices.size());
+    auto add_side = [&](std::vector<SourcePoint>& list, const SourcePoint& s) {
+        for (const auto& e : list)
+            if (chart[std::size_t(e.face)] == chart[std::size_t(s.face)]) return;
+        list.push_back(s);
+    };
+    tbb::parallel_for(std::size_t(0), output.vertices.size(), [&](std::size_t v) {
+        const SourcePoint& s = source[v];
+        if (s.face < 0) return;
+        sides[v].push_back(s);
+        const auto& t = in_tris[std::size_t(s.face)];
+        constexpr double on_edge = 1e-9;
+        const int zeros = int(s.barycentric[0] <= on_edge) + int(s.barycentric[1] <= on_edge) + int(s.barycentric[2] <= on_edge);
+        if (zeros == 0) return;
+        const Eigen::Vector3d p = point_of(s);
+        std::size_t i = 0; // zeros == 1: the corner opposite the edge; zeros == 2: the corner it sits on
+        while (zeros == 1 ? s.barycentric[Eigen::Index(i)] > on_edge : s.barycentric[Eigen::Index(i)] <= on_edge) ++i;
+        const auto& across = zeros == 1 ? edge_faces.at(edge_key(t[(i + 1) % 3], t[(i + 2) % 3])) : vertex_faces[std::size_t(t[i])];
+        for (const auto g : across) add_side(sides[v], in_face(p, g));
+    });
+    auto side_in = [&](std::int32_t v, std::int32_t c) -> const SourcePoint* {
+        for (const auto& e : sides[std::size_t(v)])
+            if (chart[std::size_t(e.face)] == c) return &e;
+        return nullptr;
+    };
+    // A chart both vertices touch (-1: none: the edge between them crosses a seam).
+    auto common = [&](std::int32_t a, std::int32_t b) {
+        for (const auto& e : sides[std::size_t(a)])
+            if (side_in(b, chart[std::size_t(e.face)])) return chart[std::size_t(e.face)];
+        return std::int32_t(-1);
+    };
+
+    // The seam vertex of output edge (a, b) whose ends lie in different charts: bisection along the segment between
+    // their source points, each midpoint taken to the input surface (nearest point facing the same way), to where
+    // it leaves a's charts; placed at the same fraction of the output edge.
+    std::unordered_map<std::uint64_t, std::int32_t> seams;
+    auto seam_vertex = [&](std::int32_t a, std::int32_t b) {
+        if (a > b) std::swap(a, b);
+        const auto [it, added] = seams.try_emplace(edge_key(a, b), std::int32_t(output.vertices.size()));
+        if (!added) return it->second;
+        SourcePoint low = source[std::size_t(a)], high = source[std::size_t(b)];
+        const Eigen::Vector3d pa = point_of(low), pb = point_of(high);
+        const Eigen::Vector3d n = normal_of(low.face) + normal_of(high.face);
+        const double reach = 2 * (pb - pa).norm() + 1e-12;
+        double t0 = 0, t1 = 1;
+        for (int i = 0; i < 24 && (t1 - t0) * (pb - pa).norm() > 1e-9 * reach; ++i) {
+            const double t = 0.5 * (t0 + t1);
+            const SourcePoint s = surface.nearest((1 - t) * pa + t * pb, n, reach);
+            if (s.face < 0) break;
+            if (side_in(a, chart[std::size_t(s.face)])) t0 = t, low = s;
+            else t1 = t, high = s;
+        }
+        const double t = 0.5 * (t0 + t1);
+        const Eigen::Vector3d q = 0.5 * (point_of(low) + point_of(high)); // the seam point, seen from a face on each side
+        output.vertices.push_back((1 - t) * output.vertices[std::size_t(a)] + t * output.vertices[std::size_t(b)]);
+        source.push_back(in_face(q, low.face));
+        sides.push_back({in_face(q, low.face)});
+        add_side(sides.back(), in_face(q, high.face));
+        ++report.vertices_added;
+        return it->second;
+    };
+    auto primary = [&](std::int32_t v) { return source[std::size_t(v)].face >= 0 ? chart[std::size_t(source[std::size_t(v)].face)] : -1; };
+
+    // Cut every triangle whose edges cross seams into pieces that each lie in one chart.
+    struct Piece {
+        std::array<std::int32_t, 3> corners;
+        std::int32_t chart;
+    };
+    std::vector<Piece> pieces;
+    pieces.reserve(output.triangles.size() + output.triangles.size() / 16);
+    std::vector<std::size_t> cut; // the pieces of cut triangles
+    for (const auto& t : output.triangles) {
+        if (source[std::size_t(t[0])].face < 0 || source[std::size_t(t[1])].face < 0 || source[std::size_t(t[2])].face < 0) { // nothing of the input within reach
+            pieces.push_back({t, -1});
+            continue;
+        }
+        const std::array<std::int32_t, 3> shared{common(t[0], t[1]), common(t[1], t[2]), common(t[2], t[0])};
+        const int crossings = int(shared[0] < 0) + int(shared[1] < 0) + int(shared[2] < 0);
+        if (crossings == 0) {
+            std::int32_t c = shared[0];
+            for (const auto& e : sides[std::size_t(t[0])]) // a chart all three touch, if there is one
+                if (side_in(t[1], chart[std::size_t(e.face)]) && side_in(t[2], chart[std::size_t(e.face)])) c = chart[std::size_t(e.face)];
+            pieces.push_back({t, c});
+            continue;
+        }
+        ++report.triangles_across_charts;
+        const std::size_t first_piece = pieces.size();
+        if (crossings == 1) { // a seam through one corner and across the opposite edge
+            std::size_t e = 0;
+            while (shared[e] >= 0) ++e;
+            const std::int32_t a = t[e], b = t[(e + 1) % 3], c = t[(e + 2) % 3], m = seam_vertex(a, b);
+            pieces.push_back({{a, m, c}, shared[(e + 2) % 3]});
+            pieces.push_back({{m, b, c}, shared[(e + 1) % 3]});
+        } else if (crossings == 2) { // a seam across two edges: the odd corner's piece, and the quad of the other two
+            std::size_t e = 0;
+            while (shared[e] < 0) ++e; // the edge that stays: corners a, b; the odd one o
+            const std::int32_t a = t[e], b = t[(e + 1) % 3], o = t[(e + 2) % 3];
+            const std::int32_t mbo = seam_vertex(b, o), moa = seam_vertex(o, a);
+            pieces.push_back({{a, b, mbo}, shared[e]});
+            pieces.push_back({{a, mbo, moa}, shared[e]});
+            pieces.push_back({{mbo, o, moa}, primary(o)});
+        } else { // three charts: a piece at each corner, and the middle
+            const std::int32_t m01 = seam_vertex(t[0], t[1]), m12 = seam_vertex(t[1], t[2]), m20 = seam_vertex(t[2], t[0]);
+            pieces.push_back({{t[0], m01, m20}, primary(t[0])});
+            pieces.push_back({{t[1], m12, m01}, primary(t[1])});
+            pieces.push_back({{t[2], m20, m12}, primary(t[2])});
+            pieces.push_back({{m01, m12, m20}, primary(t[0])});
+        }
+        for (std::size_t i = first_piece; i < pieces.size(); ++i) cut.push_back(i);
+    }
+    // Where charts meet inside a triangle (a junction of seams), or an edge crosses a strip of a third chart, a piece
+    // cut along the corners' seams can lie in a chart none of its corners names: each piece of a cut triangle takes
+    // the chart of the input point nearest its middle.
+    std::vector<std::int32_t> middle_face(pieces.size(), -1);
+    tbb::parallel_for(std::size_t(0), cut.size(), [&](std::size_t i) {
+        Piece& p = pieces[cut[i]];
+        const SourcePoint a = source[std::size_t(p.corners[0])], b = source[std::size_t(p.corners[1])], c = source[std::size_t(p.corners[2])];
+        const Eigen::Vector3d pa = point_of(a), pb = point_of(b), pc = point_of(c);
+        const double reach = 2 * std::max({(pa - pb).norm(), (pb - pc).norm(), (pc - pa).norm()}) + 1e-12;
+        const SourcePoint m = surface.nearest((pa + pb + pc) / 3, normal_of(a.face) + normal_of(b.face) + normal_of(c.face), reach);
+        if (m.face >= 0) p.chart = chart[std::size_t(m.face)], middle_face[cut[i]] = m.face;
+    });
+
+    output.triangles.resize(pieces.size());
+    for (std::size_t f = 0; f < pieces.size(); ++f) output.triangles[f] = pieces[f].corners;
+
+    if (!input.colours.empty()) {
+        output.colours.assign(output.vertices.size(), Eigen::Vector3f::Ones());
+        tbb::parallel_for(std::size_t(0), output.vertices.size(), [&](std::size_t v) {
+            const SourcePoint& s = source[v];
+            if (s.face < 0) return;
+            const auto& t = in_tris[std::size_t(s.face)];
+            Eigen::Vector3f c = Eigen::Vector3f::Zero();
+            for (int i = 0; i < 3; ++i) c += float(s.barycentric[i]) * input.colours[std::size_t(t[std::size_t(i)])];
+            output.colours[v] = c.cwiseMax(0.0f).cwiseMin(1.0f);
+        });
+    }
+    if (!input.triangle_materials.empty()) {
+        output.triangle_materials.resize(pieces.size());
+        for (std::size_t f = 0; f < pieces.size(); ++f) output.triangle_materials[f] = pieces[f].chart >= 0 ? chart_material[std::size_t(pieces[f].chart)] : -1;
+    }
+    if (!input.triangle_uvs.empty()) {
+        output.triangle_uvs.assign(pieces.size(), {-1, -1, -1});
+        // (vertex, chart) -> its texture coordinate's index: corners of one vertex in one chart share it.
+        std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> shared(output.vertices.size());
+        for (std::size_t f = 0; f < pieces.size(); ++f) {
+            const Piece& p = pieces[f];
+            if (p.chart < 0) continue;
+            // A face of the piece's chart to continue texture coordinates from, for a corner that does not touch it.
+            std::int32_t face = middle_face[f];
+            for (const auto v : p.corners)
+                if (const SourcePoint* s = side_in(v, p.chart); s && face < 0) face = s->face;
+            if (face < 0 || input.triangle_uvs[std::size_t(face)][0] < 0) continue;
+            for (std::size_t c = 0; c < 3; ++c) {
+                const std::int32_t v = p.corners[c];
+                auto& known = shared[std::size_t(v)];
+                const auto it = std::find_if(known.begin(), known.end(), [&](const auto& e) { return e.first == p.chart; });
+                if (it != known.end()) {
+                    output.triangle_uvs[f][c] = it->second;
+                    continue;
+                }
+                const SourcePoint* side = side_in(v, p.chart);
+                const SourcePoint s = side && input.triangle_uvs[std::size_t(side->face)][0] >= 0 ? *side : in_face(point_of(sides[std::size_t(v)][0]), face);
+                Eigen::Vector2d uv = Eigen::Vector2d::Zero();
+                for (std::size_t i = 0; i < 3; ++i) uv += s.barycentric[Eigen::Index(i)] * input.uvs[std::size_t(input.triangle_uvs[std::size_t(s.face)][i])];
+                output.triangle_uvs[f][c] = std::int32_t(output.uvs.size());
+                known.emplace_back(p.chart, std::int32_t(output.uvs.size()));
+                output.uvs.push_back(uv);
+            }
+        }
+    }
+    return report;
+}
+
+} // namespace voxwarp
