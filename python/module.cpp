@@ -204,6 +204,69 @@ py::tuple arrays_from_mesh(TriangleMesh&& mesh) {
     return py::make_tuple(adopt<double>(std::move(triangles.vertices), 3), adopt<std::int32_t>(std::move(triangles.triangles), 3));
 }
 
+/// A mesh's attributes as a dict of numpy arrays (the keys it has): "uv" float64 (k, 2), "uv_index" int32 (m, 3)
+/// (each triangle's corners' rows of uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,)
+/// (index into "materials", -1: none), "materials": a list of dicts (name, diffuse, texture, statements).
+py::dict attributes_dict(TriangleMesh& mesh) {
+    static_assert(sizeof(Eigen::Vector2d) == 2 * sizeof(double) && sizeof(Eigen::Vector3f) == 3 * sizeof(float));
+    py::dict a;
+    if (!mesh.triangle_uvs.empty()) {
+        a["uv"] = adopt<double>(std::move(mesh.uvs), 2);
+        a["uv_index"] = adopt<std::int32_t>(std::move(mesh.triangle_uvs), 3);
+    }
+    if (!mesh.colours.empty()) a["colour"] = adopt<float>(std::move(mesh.colours), 3);
+    if (!mesh.triangle_materials.empty()) a["material"] = adopt<std::int32_t>(std::move(mesh.triangle_materials), 1).attr("reshape")(-1);
+    py::list materials;
+    for (const auto& m : mesh.materials)
+        materials.append(py::dict(py::arg("name") = m.name, py::arg("diffuse") = py::make_tuple(m.diffuse.x(), m.diffuse.y(), m.diffuse.z()),
+                                  py::arg("texture") = m.texture, py::arg("statements") = m.statements));
+    if (!mesh.materials.empty()) a["materials"] = materials;
+    return a;
+}
+
+/// The inverse of attributes_dict, checked against the mesh (sizes, indices, finite values); None: no attributes.
+void attributes_from(const py::handle& attributes, TriangleMesh& mesh) {
+    if (attributes.is_none()) return;
+    if (!py::isinstance<py::dict>(attributes)) throw InvalidInput("attributes: expected a dict (the one read_mesh(..., attributes=True) returns)");
+    const py::dict a = py::reinterpret_borrow<py::dict>(attributes);
+    auto rows = [&](const char* key, py::ssize_t columns, auto type_tag) {
+        using T = decltype(type_tag);
+        const auto array = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(a[key]);
+        const bool ok = array && (columns == 0 ? array.ndim() == 1 : array.ndim() == 2 && array.shape(1) == columns);
+        if (!ok) throw InvalidInput(std::string("attributes[\"") + key + "\"]: expected an array of shape (k" + (columns ? ", " + std::to_string(columns) : std::string()) + ")");
+        return array;
+    };
+    if (a.contains("uv") != a.contains("uv_index")) throw InvalidInput("attributes: \"uv\" and \"uv_index\" go together");
+    if (a.contains("uv")) {
+        const auto uv = rows("uv", 2, double{});
+        const auto index = rows("uv_index", 3, std::int32_t{});
+        for (py::ssize_t i = 0; i < uv.shape(0); ++i) mesh.uvs.emplace_back(uv.at(i, 0), uv.at(i, 1));
+        for (py::ssize_t i = 0; i < index.shape(0); ++i) mesh.triangle_uvs.push_back({index.at(i, 0), index.at(i, 1), index.at(i, 2)});
+    }
+    if (a.contains("colour")) {
+        const auto c = rows("colour", 3, float{});
+        for (py::ssize_t i = 0; i < c.shape(0); ++i) mesh.colours.emplace_back(c.at(i, 0), c.at(i, 1), c.at(i, 2));
+    }
+    if (a.contains("material")) {
+        const auto m = rows("material", 0, std::int32_t{});
+        for (py::ssize_t i = 0; i < m.shape(0); ++i) mesh.triangle_materials.push_back(m.at(i));
+    }
+    if (a.contains("materials"))
+        for (const auto& item : a["materials"]) {
+            const py::dict d = py::reinterpret_borrow<py::dict>(item);
+            Material m;
+            m.name = d["name"].cast<std::string>();
+            if (d.contains("diffuse")) {
+                const auto k = d["diffuse"].cast<std::array<double, 3>>();
+                m.diffuse = Eigen::Vector3d(k[0], k[1], k[2]);
+            }
+            if (d.contains("texture")) m.texture = d["texture"].cast<std::string>();
+            if (d.contains("statements")) m.statements = d["statements"].cast<std::vector<std::string>>();
+            mesh.materials.push_back(std::move(m));
+        }
+    check_attributes(mesh, "attributes");
+}
+
 /// An edit: a dict in the edit-file schema (validated by the same code, named "edit" in messages) or a path.
 EditScript edit_from(const py::handle& edit) {
     if (py::isinstance<py::dict>(edit)) {
@@ -265,25 +328,36 @@ void define_module(py::module_& m) {
 
     m.def(
         "read_mesh",
-        [](const py::handle& path) {
+        [](const py::handle& path, bool attributes) -> py::tuple {
             const std::string p = path_of(path);
             TriangleMesh mesh;
+            std::vector<std::string> warnings;
             {
                 py::gil_scoped_release release;
-                mesh = read_mesh(p);
+                mesh = read_mesh(p, &warnings);
             }
-            return arrays_from_mesh(std::move(mesh));
+            for (const auto& w : warnings) PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1);
+            if (!attributes) return arrays_from_mesh(std::move(mesh));
+            py::dict a = attributes_dict(mesh);
+            py::tuple arrays = arrays_from_mesh(std::move(mesh));
+            return py::make_tuple(arrays[0], arrays[1], a);
         },
-        py::arg("path"), "Read a mesh file (.obj .off .ply .stl .om) as (V, F): float64 (n, 3) world positions, int32 (m, 3) triangles.");
+        py::arg("path"), py::kw_only(), py::arg("attributes") = false,
+        "Read a mesh file (.obj .off .ply .stl .om) as (V, F): float64 (n, 3) world positions, int32 (m, 3) triangles;\n"
+        "with attributes=True, (V, F, attributes): texture coordinates, colours and materials as a dict of arrays. A missing\n"
+        ".mtl or texture is a UserWarning.");
     m.def(
         "write_mesh",
-        [](const py::handle& path, const py::handle& V, const py::handle& F) {
+        [](const py::handle& path, const py::handle& V, const py::handle& F, const py::handle& attributes) {
             const std::string p = path_of(path);
-            const TriangleMesh mesh = mesh_from_arrays(V, F);
+            TriangleMesh mesh = mesh_from_arrays(V, F);
+            attributes_from(attributes, mesh);
             py::gil_scoped_release release;
             write_mesh(mesh, p);
         },
-        py::arg("path"), py::arg("V"), py::arg("F"), "Write (V, F) to a mesh file (format by extension), atomically: a failure leaves no file.");
+        py::arg("path"), py::arg("V"), py::arg("F"), py::arg("attributes") = py::none(),
+        "Write (V, F) to a mesh file (format by extension), atomically: a failure leaves no file. `attributes` as read_mesh\n"
+        "gives them (an OBJ with materials gets its .mtl beside it).");
 
     py::class_<Voxmap, std::shared_ptr<Voxmap>>(m, "Voxmap", "A dense density volume: density in [0, 1], surface at 0.5.")
         .def(py::init([](const py::handle& density, const py::handle& origin, double voxel_size) { return voxmap_from_array(density, origin, voxel_size); }),
@@ -329,9 +403,10 @@ void define_module(py::module_& m) {
     m.def(
         "deform",
         [](const py::handle& V, const py::handle& F, const py::handle& edit, int resolution, const py::object& voxel_size, const std::string& mode, bool preview,
-           int max_steps, std::size_t faces, const std::string& mesher, const std::string& sign, bool snap, const py::object& max_memory,
-           const py::object& progress) {
-            const TriangleMesh mesh = mesh_from_arrays(V, F);
+           int max_steps, std::size_t faces, const std::string& mesher, const std::string& sign, bool snap, const py::object& attributes,
+           const py::object& max_memory, const py::object& progress) -> py::tuple {
+            TriangleMesh mesh = mesh_from_arrays(V, F);
+            attributes_from(attributes, mesh);
             const EditScript script = edit_from(edit);
             if (mode != "volume" && mode != "vertex") throw InvalidInput("mode: expected \"volume\" or \"vertex\", got \"" + mode + "\"");
             if (max_steps < 1 || max_steps > 64) throw InvalidInput("max_steps: " + std::to_string(max_steps) + " is outside [1, 64]");
@@ -345,14 +420,17 @@ void define_module(py::module_& m) {
             const auto start = std::chrono::steady_clock::now();
             TriangleMesh out = call.run([&] { return mode == "vertex" ? deform_vertices(mesh, script, o, report) : deform_mesh(mesh, script, o, report); });
             report.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+            py::dict a = attributes_dict(out);
             py::tuple arrays = arrays_from_mesh(std::move(out));
-            return py::make_tuple(arrays[0], arrays[1], report_dict(report));
+            if (attributes.is_none()) return py::make_tuple(arrays[0], arrays[1], report_dict(report));
+            return py::make_tuple(arrays[0], arrays[1], report_dict(report), a);
         },
         py::arg("V"), py::arg("F"), py::arg("edit"), py::kw_only(), py::arg("resolution") = 128, py::arg("voxel_size") = py::none(), py::arg("mode") = "volume",
         py::arg("preview") = false, py::arg("max_steps") = 8, py::arg("faces") = 0, py::arg("mesher") = "mc", py::arg("sign") = "auto", py::arg("snap") = true,
-        py::arg("max_memory") = py::none(), py::arg("progress") = py::none(),
+        py::arg("attributes") = py::none(), py::arg("max_memory") = py::none(), py::arg("progress") = py::none(),
         "Deform a mesh by an edit script (dict or path): voxelize, warp, re-polygonize, and (snap=True) move each output vertex onto\n"
-        "the exact image of its source point on the input. Returns (V, F, report).");
+        "the exact image of its source point on the input. Returns (V, F, report); given the input's `attributes` (as read_mesh\n"
+        "returns them), (V, F, report, attributes) with the output's, read at each vertex's source point.");
     m.def(
         "set_threads",
         [](int threads) {

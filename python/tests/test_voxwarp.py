@@ -282,3 +282,31 @@ def test_long_calls_release_the_gil():
     stop.set()
     counter.join()
     assert during > 20  # a call holding the GIL would have let the counter run not at all
+
+
+def test_attributes_come_through_deform_and_files_as_arrays(tmp):
+    V, F, A = voxwarp.read_mesh(data("spot_triangulated.obj"), attributes=True)
+    assert A["uv"].dtype == np.float64 and A["uv"].shape == (3225, 2)
+    assert A["uv_index"].dtype == np.int32 and A["uv_index"].shape == F.shape
+    assert A["material"].shape == (len(F),) and (A["material"] == 0).all()
+    assert A["materials"][0]["name"] == "Spot" and os.path.samefile(A["materials"][0]["texture"], data("spot_texture.png"))
+    V2, F2, report, A2 = voxwarp.deform(V, F, data("spot_head.json"), resolution=64, attributes=A)
+    assert report["attributes"] and A2["uv_index"].shape == F2.shape and A2["material"].shape == (len(F2),)
+    assert A2["uv_index"].min() >= 0 and A2["uv_index"].max() < len(A2["uv"])
+    # The same run without attributes gives the same geometry but for the vertices added on seams.
+    V3, F3, _ = voxwarp.deform(V, F, data("spot_head.json"), resolution=64)
+    assert len(F2) - len(F3) == 2 * (len(V2) - len(V3)) > 0
+    assert np.array_equal(V2[: len(V3)], V3)
+    # Written as OBJ with its .mtl, read back the same; the texture found from the output's folder.
+    (tmp / "out").mkdir()
+    voxwarp.write_mesh(tmp / "out" / "cow.obj", V2, F2, A2)
+    V4, F4, A4 = voxwarp.read_mesh(tmp / "out" / "cow.obj", attributes=True)
+    assert np.array_equal(A4["uv"], A2["uv"]) and np.array_equal(A4["uv_index"], A2["uv_index"]) and np.array_equal(F4, F2)
+    assert os.path.samefile(A4["materials"][0]["texture"], data("spot_texture.png"))
+    with pytest.raises(voxwarp.InvalidInput, match="triangle_uvs has 5 entries, expected one per triangle"):
+        voxwarp.write_mesh(tmp / "bad.obj", V2, F2, {"uv": A2["uv"], "uv_index": A2["uv_index"][:5]})
+    assert not (tmp / "bad.obj").exists()
+    (tmp / "nolib.obj").write_text("mtllib gone.mtl\nusemtl skin\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    with pytest.warns(UserWarning, match="gone.mtl not found"):
+        _, _, A5 = voxwarp.read_mesh(tmp / "nolib.obj", attributes=True)
+    assert A5["materials"][0]["name"] == "skin"

@@ -11,8 +11,8 @@ counter-clockwise seen from outside. Arrays returned by voxwarp own their memory
     voxwarp.write_mesh("ear.ply", V2, F2)
 
 Functions
-    read_mesh(path) -> (V, F)
-    write_mesh(path, V, F)                   written to a temporary file and renamed: never half written
+    read_mesh(path, attributes=False) -> (V, F), or (V, F, attributes)
+    write_mesh(path, V, F, attributes=None)  written to a temporary file and renamed: never half written
     voxelize(V, F, resolution=128 | voxel_size=h, padding=3, sign="auto", max_memory=None, progress=None) -> Voxmap
     extract(voxmap, isovalue=0.5, adaptivity=0.0, mesher="mc", progress=None) -> (V, F)
     deform(V, F, edit, resolution=128 | voxel_size=h, mode="volume", preview=False, max_steps=8, faces=0,
@@ -21,6 +21,12 @@ Functions
         sign: "auto", "flood-fill" or "winding-number", as --sign (the report's "sign" and "sign_note" say which ran);
         edit: a dict in the edit-file schema (README.md, "Edit files") or a path to an edit file;
         report: the dict `voxwarp deform --report` writes (residuals, surface misses, volumes, timings).
+    deform(..., attributes=A) -> (V, F, report, attributes): the input's attributes in, the output's out.
+
+Attributes (texture coordinates, colours, materials; README.md, "Texture coordinates, colours and materials"), a
+dict with the keys the mesh has: "uv" float64 (k, 2) and "uv_index" int32 (m, 3) (each triangle's corners' rows of
+uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,) (index into "materials", -1: none),
+"materials": [{"name", "diffuse", "texture", "statements"}]. A missing .mtl or texture is a UserWarning.
 
 Voxmap
     Voxmap(density, origin=(0, 0, 0), voxel_size=1.0): from a (nx, ny, nz) array (copied).
