@@ -157,33 +157,83 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     };
 
     // The seam vertex of output edge (a, b) whose ends lie in different charts: bisection along the segment between
-    // their source points, each midpoint taken to the input surface (nearest point facing the same way), to where
-    // it leaves a's charts; placed at the same fraction of the output edge.
-    std::unordered_map<std::uint64_t, std::int32_t> seams;
-    auto seam_vertex = [&](std::int32_t a, std::int32_t b) {
-        if (a > b) std::swap(a, b);
-        const auto [it, added] = seams.try_emplace(edge_key(a, b), std::int32_t(output.vertices.size()));
-        if (!added) return it->second;
+    // their source points, each midpoint taken to the input surface (nearest point facing the same way), until the
+    // two sides' faces share an edge (the seam's): then where the segment passes closest to that edge. Placed at the
+    // same fraction of the output edge. Every such edge is found first, then all are bisected in parallel.
+    // Per triangle, the chart each edge's two ends share (-1: the edge crosses a seam; all -1 for a triangle with a
+    // corner without source, which keeps no attributes).
+    const std::size_t nt = output.triangles.size();
+    std::vector<std::array<std::int32_t, 3>> edge_chart(nt);
+    tbb::parallel_for(std::size_t(0), nt, [&](std::size_t f) {
+        const auto& t = output.triangles[f];
+        const bool sourced = source[std::size_t(t[0])].face >= 0 && source[std::size_t(t[1])].face >= 0 && source[std::size_t(t[2])].face >= 0;
+        edge_chart[f] = sourced ? std::array<std::int32_t, 3>{common(t[0], t[1]), common(t[1], t[2]), common(t[2], t[0])} : std::array<std::int32_t, 3>{-2, -2, -2};
+    });
+    std::vector<std::uint64_t> crossing_edges;
+    for (std::size_t f = 0; f < nt; ++f)
+        for (std::size_t c = 0; c < 3; ++c)
+            if (edge_chart[f][c] == -1) crossing_edges.push_back(edge_key(output.triangles[f][c], output.triangles[f][(c + 1) % 3]));
+    std::sort(crossing_edges.begin(), crossing_edges.end());
+    crossing_edges.erase(std::unique(crossing_edges.begin(), crossing_edges.end()), crossing_edges.end());
+    struct Crossing {
+        double t = 0.5;
+        Eigen::Vector3d q = Eigen::Vector3d::Zero();
+        std::int32_t low_face = -1, high_face = -1;
+    };
+    std::vector<Crossing> crossings(crossing_edges.size());
+    auto shared_edge = [&](std::int32_t f, std::int32_t g, std::array<std::int32_t, 2>& edge) {
+        int n = 0;
+        for (const auto u : in_tris[std::size_t(f)])
+            for (const auto w : in_tris[std::size_t(g)])
+                if (u == w && n < 2) edge[std::size_t(n++)] = u;
+        return n == 2;
+    };
+    tbb::parallel_for(std::size_t(0), crossing_edges.size(), [&](std::size_t i) {
+        const auto a = std::int32_t(crossing_edges[i] >> 32), b = std::int32_t(crossing_edges[i] & 0xffffffffu);
         SourcePoint low = source[std::size_t(a)], high = source[std::size_t(b)];
-        const Eigen::Vector3d pa = point_of(low), pb = point_of(high);
+        const Eigen::Vector3d pa = point_of(low), pb = point_of(high), d = pb - pa;
         const Eigen::Vector3d n = normal_of(low.face) + normal_of(high.face);
-        const double reach = 2 * (pb - pa).norm() + 1e-12;
+        const double reach = 2 * d.norm() + 1e-12;
         double t0 = 0, t1 = 1;
-        for (int i = 0; i < 24 && (t1 - t0) * (pb - pa).norm() > 1e-9 * reach; ++i) {
+        std::array<std::int32_t, 2> edge{};
+        bool exact = false;
+        for (int k = 0; k < 30 && !(exact = shared_edge(low.face, high.face, edge)) && (t1 - t0) * d.norm() > 1e-9 * reach; ++k) {
             const double t = 0.5 * (t0 + t1);
-            const SourcePoint s = surface.nearest((1 - t) * pa + t * pb, n, reach);
+            const SourcePoint s = surface.nearest(pa + t * d, n, reach);
             if (s.face < 0) break;
             if (side_in(a, chart[std::size_t(s.face)])) t0 = t, low = s;
             else t1 = t, high = s;
         }
-        const double t = 0.5 * (t0 + t1);
-        const Eigen::Vector3d q = 0.5 * (point_of(low) + point_of(high)); // the seam point, seen from a face on each side
-        output.vertices.push_back((1 - t) * output.vertices[std::size_t(a)] + t * output.vertices[std::size_t(b)]);
-        source.push_back(in_face(q, low.face));
-        sides.push_back({in_face(q, low.face)});
-        add_side(sides.back(), in_face(q, high.face));
-        ++report.vertices_added;
-        return it->second;
+        Crossing& x = crossings[i];
+        x.low_face = low.face, x.high_face = high.face;
+        x.t = 0.5 * (t0 + t1);
+        x.q = 0.5 * (point_of(low) + point_of(high));
+        if (exact) { // the closest points of the segment and the seam's edge
+            const Eigen::Vector3d u = V[std::size_t(edge[0])], e = V[std::size_t(edge[1])] - u, r = pa - u;
+            const double dd = d.dot(d), de = d.dot(e), ee = e.dot(e), denominator = dd * ee - de * de;
+            if (denominator > 1e-12 * dd * ee) {
+                const double t = std::clamp((de * e.dot(r) - ee * d.dot(r)) / denominator, t0, t1);
+                const double along = std::clamp((e.dot(r) + t * de) / ee, 0.0, 1.0);
+                x.t = t, x.q = u + along * e;
+            }
+        }
+    });
+    const auto first_seam_vertex = std::int32_t(output.vertices.size());
+    output.vertices.reserve(output.vertices.size() + crossing_edges.size());
+    source.reserve(source.size() + crossing_edges.size());
+    sides.reserve(sides.size() + crossing_edges.size());
+    for (std::size_t i = 0; i < crossing_edges.size(); ++i) {
+        const auto a = std::size_t(crossing_edges[i] >> 32), b = std::size_t(crossing_edges[i] & 0xffffffffu);
+        const Crossing& x = crossings[i];
+        output.vertices.push_back((1 - x.t) * output.vertices[a] + x.t * output.vertices[b]);
+        source.push_back(in_face(x.q, x.low_face));
+        sides.push_back({in_face(x.q, x.low_face)});
+        add_side(sides.back(), in_face(x.q, x.high_face));
+    }
+    report.vertices_added = crossing_edges.size();
+    auto seam_vertex = [&](std::int32_t a, std::int32_t b) {
+        const auto it = std::lower_bound(crossing_edges.begin(), crossing_edges.end(), edge_key(a, b));
+        return first_seam_vertex + std::int32_t(it - crossing_edges.begin());
     };
     auto primary = [&](std::int32_t v) { return source[std::size_t(v)].face >= 0 ? chart[std::size_t(source[std::size_t(v)].face)] : -1; };
 
@@ -195,12 +245,13 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     std::vector<Piece> pieces;
     pieces.reserve(output.triangles.size() + output.triangles.size() / 16);
     std::vector<std::size_t> cut; // the pieces of cut triangles
-    for (const auto& t : output.triangles) {
-        if (source[std::size_t(t[0])].face < 0 || source[std::size_t(t[1])].face < 0 || source[std::size_t(t[2])].face < 0) { // nothing of the input within reach
+    for (std::size_t f = 0; f < nt; ++f) {
+        const auto& t = output.triangles[f];
+        const auto& shared = edge_chart[f];
+        if (shared[0] == -2) { // nothing of the input within reach
             pieces.push_back({t, -1});
             continue;
         }
-        const std::array<std::int32_t, 3> shared{common(t[0], t[1]), common(t[1], t[2]), common(t[2], t[0])};
         const int crossings = int(shared[0] < 0) + int(shared[1] < 0) + int(shared[2] < 0);
         if (crossings == 0) {
             std::int32_t c = shared[0];
@@ -268,7 +319,8 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     if (!input.triangle_uvs.empty()) {
         output.triangle_uvs.assign(pieces.size(), {-1, -1, -1});
         // (vertex, chart) -> its texture coordinate's index: corners of one vertex in one chart share it.
-        std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> shared(output.vertices.size());
+        std::vector<std::pair<std::int32_t, std::int32_t>> first(output.vertices.size(), {-1, -1}); // the first chart seen at a vertex
+        std::unordered_map<std::uint64_t, std::int32_t> more;                                      // (vertex, chart) beyond it: seams
         for (std::size_t f = 0; f < pieces.size(); ++f) {
             const Piece& p = pieces[f];
             if (p.chart < 0) continue;
@@ -279,18 +331,24 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
             if (face < 0 || input.triangle_uvs[std::size_t(face)][0] < 0) continue;
             for (std::size_t c = 0; c < 3; ++c) {
                 const std::int32_t v = p.corners[c];
-                auto& known = shared[std::size_t(v)];
-                const auto it = std::find_if(known.begin(), known.end(), [&](const auto& e) { return e.first == p.chart; });
-                if (it != known.end()) {
-                    output.triangle_uvs[f][c] = it->second;
+                auto& known = first[std::size_t(v)];
+                const std::uint64_t key = (std::uint64_t(std::uint32_t(v)) << 32) | std::uint32_t(p.chart);
+                if (known.first == p.chart) {
+                    output.triangle_uvs[f][c] = known.second;
                     continue;
                 }
+                if (known.first >= 0)
+                    if (const auto it = more.find(key); it != more.end()) {
+                        output.triangle_uvs[f][c] = it->second;
+                        continue;
+                    }
                 const SourcePoint* side = side_in(v, p.chart);
                 const SourcePoint s = side && input.triangle_uvs[std::size_t(side->face)][0] >= 0 ? *side : in_face(point_of(sides[std::size_t(v)][0]), face);
                 Eigen::Vector2d uv = Eigen::Vector2d::Zero();
                 for (std::size_t i = 0; i < 3; ++i) uv += s.barycentric[Eigen::Index(i)] * input.uvs[std::size_t(input.triangle_uvs[std::size_t(s.face)][i])];
                 output.triangle_uvs[f][c] = std::int32_t(output.uvs.size());
-                known.emplace_back(p.chart, std::int32_t(output.uvs.size()));
+                if (known.first < 0) known = {p.chart, std::int32_t(output.uvs.size())};
+                else more.emplace(key, std::int32_t(output.uvs.size()));
                 output.uvs.push_back(uv);
             }
         }
