@@ -5,6 +5,7 @@
 #include <voxwarp/errors.h>
 #include <voxwarp/mesh_io.h>
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
@@ -35,6 +36,13 @@ std::string with_file(const std::string& statement, const std::string& file) {
     return statement.substr(0, at + 1) + file;
 }
 
+// A word of a file for a message: printable, and short.
+std::string printable(const std::string& word) {
+    std::string out;
+    for (const char c : word.substr(0, 40)) out += std::isprint(static_cast<unsigned char>(c)) ? c : '?';
+    return "'" + out + (word.size() > 40 ? "...'" : "'");
+}
+
 std::string last_word(const std::string& statement) {
     const auto at = statement.find_last_of(" \t");
     return at == std::string::npos ? "" : statement.substr(at + 1);
@@ -62,7 +70,7 @@ std::vector<Material> read_material_library(const std::string& path, std::vector
             materials.push_back(Material{trim(name)});
             continue;
         }
-        if (materials.empty()) throw InvalidInput(path + ": line " + std::to_string(number) + ": '" + keyword + "' before any newmtl");
+        if (materials.empty()) throw InvalidInput(path + ": line " + std::to_string(number) + ": " + printable(keyword) + " before any newmtl");
         Material& m = materials.back();
         if (keyword == "Kd") {
             Eigen::Vector3d kd;

@@ -162,7 +162,10 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
                 }
             }
         } else if (keyword == "usemtl") {
-            std::string name(token(line));
+            // The rest of the line, as newmtl's name in the library is read (names may hold spaces).
+            while (!line.empty() && space(line.front())) line.remove_prefix(1);
+            while (!line.empty() && space(line.back())) line.remove_suffix(1);
+            std::string name(line);
             const auto [it, added] = material_ids.try_emplace(name, std::int32_t(mesh.materials.size()));
             if (added) mesh.materials.push_back(Material{name});
             material = it->second;
