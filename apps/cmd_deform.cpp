@@ -25,9 +25,9 @@ struct DeformArgs {
 };
 
 void add_common_options(CLI::App* cmd, DeformArgs& a, bool mesh_input) {
-    cmd->add_option("input", a.input, mesh_input ? "Input mesh (.obj .off .ply .stl .om)" : "Input voxmap (.vdb)")->required();
+    cmd->add_option("input", a.input, mesh_input ? "Input mesh (.obj .off .ply .stl .om .gltf .glb)" : "Input voxmap (.vdb)")->required();
     cmd->add_option("edits", a.edits, "Edit file (JSON; schema in README.md)")->required();
-    cmd->add_option("-o,--output", a.output, mesh_input ? "Output mesh (.obj .off .ply .stl .om)" : "Output .vdb")->required();
+    cmd->add_option("-o,--output", a.output, mesh_input ? "Output mesh (.obj .off .ply .stl .om .gltf .glb)" : "Output .vdb")->required();
     cmd->add_flag("--preview", a.options.preview, "Map-and-round warp (the paper's preview: no box filter; with tents to fill stretched gaps it now costs about what the full warp does)");
     cmd->add_option("--max-steps", a.options.max_steps, "Most steps an edit is split into so the lattice map stays injective")
         ->check(CLI::Range(1, 64))
@@ -116,7 +116,7 @@ void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script,
 }
 
 void check_paths(DeformArgs& a, const Global& global) {
-    if (!is_mesh_path(a.output)) throw InvalidInput(a.output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
+    if (!is_mesh_path(a.output)) throw InvalidInput(a.output + ": unknown mesh format, expected .obj, .off, .ply, .stl, .om, .gltf or .glb");
     if (!a.png.empty() && std::filesystem::path(a.png).extension() != ".png") throw InvalidInput(a.png + ": expected a .png picture");
     a.options.voxelize.max_memory_bytes = std::uint64_t(a.max_memory_gib * double(1ull << 30));
     a.options.voxelize.sign = parse_sign(a.sign);
@@ -145,8 +145,8 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
 void add_remesh(CLI::App& app, Global& global, Action& action) {
     auto a = std::make_shared<DeformArgs>();
     auto* cmd = app.add_subcommand("remesh", "Mesh in, re-polygonized mesh out (the round trip, no edit): voxelize, extract, snap onto the input; texture coordinates, colours and materials carried");
-    cmd->add_option("input", a->input, "Input mesh (.obj .off .ply .stl .om)")->required();
-    cmd->add_option("-o,--output", a->output, "Output mesh (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("input", a->input, "Input mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
+    cmd->add_option("-o,--output", a->output, "Output mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("--report", a->report, "Write a JSON report: volumes, timings, peak memory, snapped vertices");
     cmd->add_option("--max-memory", a->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
     add_mesh_options(cmd, *a);

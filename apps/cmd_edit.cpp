@@ -135,7 +135,7 @@ private:
 void add_edit(CLI::App& app, Global& global, Action& action) {
     auto a = std::make_shared<EditArgs>();
     auto* cmd = app.add_subcommand("edit", "Edit in the browser: click the model to add handles and pins, drag them, see the result live; serves 127.0.0.1 only");
-    cmd->add_option("mesh", a->mesh, "Mesh to edit (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("mesh", a->mesh, "Mesh to edit (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("edits", a->edits, "Edit file to start from (JSON)");
     cmd->add_option("--port", a->port, "Port on 127.0.0.1 (0: any free one)")->check(CLI::Range(0, 65535))->capture_default_str();
     cmd->add_option("-r,--resolution", a->resolution, "Voxels along the mesh's longest side for the full result (drags preview at half)")

@@ -17,7 +17,7 @@ void add_extract(CLI::App& app, Global& global, Action& action) {
     auto args = std::make_shared<Args>();
     auto* cmd = app.add_subcommand("extract", "Voxmap (.vdb) -> watertight mesh of its 0.5 isosurface");
     cmd->add_option("input", args->input, "Input .vdb (first float grid, or --grid)")->required();
-    cmd->add_option("-o,--output", args->output, "Output mesh (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("-o,--output", args->output, "Output mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("--grid", args->grid, "Name of the float grid to read");
     cmd->add_option("--isovalue", args->options.isovalue, "Density of the surface")->capture_default_str();
     add_mesher_option(cmd, args->options.mesher);
@@ -25,7 +25,7 @@ void add_extract(CLI::App& app, Global& global, Action& action) {
     cmd->add_flag("--quads", args->options.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->callback([args, &global, &action] {
         action = [args, &global] {
-            if (!is_mesh_path(args->output)) throw InvalidInput(args->output + ": unknown mesh format, expected .obj, .off, .ply, .stl or .om");
+            if (!is_mesh_path(args->output)) throw InvalidInput(args->output + ": unknown mesh format, expected .obj, .off, .ply, .stl, .om, .gltf or .glb");
             args->options.progress = stderr_progress(global);
             const SparseVoxmap voxmap = read_vdb_sparse(args->input, args->grid);
             const TriangleMesh mesh = extract(voxmap, args->options);

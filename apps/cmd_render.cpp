@@ -42,7 +42,7 @@ void parse_size(const std::string& text, RenderOptions& o) {
 void add_render(CLI::App& app, Global& global, Action& action) {
     auto a = std::make_shared<RenderArgs>();
     auto* cmd = app.add_subcommand("render", "Shaded PNG of one or more meshes side by side under one camera (three.js in headless Chromium)");
-    cmd->add_option("meshes", a->inputs, "Meshes to show, left to right (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("meshes", a->inputs, "Meshes to show, left to right (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("-o,--output", a->output, "Output picture (.png)")->required();
     cmd->add_option("--view", a->view, "View direction AZIMUTH,ELEVATION in degrees (azimuth about +y from +z)")->capture_default_str();
     cmd->add_option("--size", a->size, "Picture size WIDTHxHEIGHT in pixels")->capture_default_str();

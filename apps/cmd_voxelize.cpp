@@ -16,7 +16,7 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
     };
     auto args = std::make_shared<Args>();
     auto* cmd = app.add_subcommand("voxelize", "Mesh -> antialiased density voxmap (.vdb, FloatGrid 'density', surface at 0.5)");
-    cmd->add_option("input", args->input, "Input mesh (.obj .off .ply .stl .om)")->required();
+    cmd->add_option("input", args->input, "Input mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("-o,--output", args->output, "Output .vdb file")->required();
     auto* res = cmd->add_option("-r,--resolution", args->options.resolution, "Voxels along the mesh's longest side")
                     ->capture_default_str();

@@ -343,7 +343,7 @@ void define_module(py::module_& m) {
             return py::make_tuple(arrays[0], arrays[1], a);
         },
         py::arg("path"), py::kw_only(), py::arg("attributes") = false,
-        "Read a mesh file (.obj .off .ply .stl .om) as (V, F): float64 (n, 3) world positions, int32 (m, 3) triangles;\n"
+        "Read a mesh file (.obj .off .ply .stl .om .gltf .glb) as (V, F): float64 (n, 3) world positions, int32 (m, 3) triangles;\n"
         "with attributes=True, (V, F, attributes): texture coordinates, colours and materials as a dict of arrays. A missing\n"
         ".mtl or texture is a UserWarning.");
     m.def(

@@ -283,6 +283,69 @@ TEST(Attributes, PlyKeepsColoursAndTextureCoordinatesSplitAtSeams) {
         }
 }
 
+TEST(Attributes, GltfKeepsTextureCoordinatesMaterialsColoursAndTextures) {
+    const fs::path dir = scratch("gltf");
+    TriangleMesh box = textured_box();
+    box.materials[1].texture = test::data_path("spot_texture.png");
+    std::ifstream png(test::data_path("spot_texture.png"), std::ios::binary);
+    const std::string texture((std::istreambuf_iterator<char>(png)), std::istreambuf_iterator<char>());
+    for (const char* name : {"box.glb", "box.gltf"}) {
+        SCOPED_TRACE(name);
+        write_mesh(box, (dir / name).string());
+        std::vector<std::string> warnings;
+        const TriangleMesh back = read_mesh((dir / name).string(), &warnings);
+        EXPECT_TRUE(warnings.empty()) << warnings.front();
+        // glTF splits vertices where texture coordinates differ; reading welds them again: the same closed box.
+        ASSERT_EQ(back.vertices.size(), box.vertices.size());
+        ASSERT_EQ(back.triangles.size(), box.triangles.size());
+        EXPECT_TRUE(topology(back).watertight());
+        ASSERT_EQ(back.triangle_uvs.size(), box.triangles.size());
+        ASSERT_EQ(back.colours.size(), back.vertices.size());
+        ASSERT_EQ(back.triangle_materials.size(), box.triangles.size());
+        ASSERT_EQ(back.materials.size(), 2u);
+        // Triangles come back grouped by material (one glTF primitive each): match them by their corners' positions.
+        for (std::size_t f = 0; f < box.triangles.size(); ++f) {
+            std::size_t g = 0;
+            auto same = [&](std::size_t c) { return (back.vertices[std::size_t(back.triangles[g][c])] - box.vertices[std::size_t(box.triangles[f][c])]).norm() < 1e-6; };
+            while (g < back.triangles.size() && !(same(0) && same(1) && same(2))) ++g;
+            ASSERT_LT(g, back.triangles.size()) << "triangle " << f << " is missing";
+            EXPECT_EQ(back.triangle_materials[g], box.triangle_materials[f]);
+            for (std::size_t c = 0; c < 3; ++c) {
+                EXPECT_LE((back.uvs[std::size_t(back.triangle_uvs[g][c])] - box.uvs[std::size_t(box.triangle_uvs[f][c])]).norm(), 1e-6);
+                EXPECT_LE((back.colours[std::size_t(back.triangles[g][c])] - box.colours[std::size_t(box.triangles[f][c])]).norm(), 1e-6);
+            }
+        }
+        EXPECT_EQ(back.materials[0].name, "plain");
+        EXPECT_LE((back.materials[0].diffuse - box.materials[0].diffuse).norm(), 1e-12);
+        EXPECT_TRUE(back.materials[0].texture.empty());
+        if (std::string(name) == "box.glb") {
+            EXPECT_EQ(back.materials[1].texture_bytes, texture); // embedded
+            // ... and written out beside an OBJ made from it.
+            write_mesh(back, (dir / "from_glb.obj").string());
+            const TriangleMesh obj = read_mesh((dir / "from_glb.obj").string(), &warnings);
+            EXPECT_TRUE(warnings.empty());
+            std::ifstream copy(obj.materials[1].texture, std::ios::binary);
+            EXPECT_EQ(std::string((std::istreambuf_iterator<char>(copy)), std::istreambuf_iterator<char>()), texture) << obj.materials[1].texture;
+        } else {
+            EXPECT_TRUE(fs::equivalent(back.materials[1].texture, test::data_path("spot_texture.png"))) << back.materials[1].texture;
+        }
+    }
+    // Broken files: refused with the file's name; nothing written when an output fails.
+    write_text(dir / "corrupt.glb", "glTF\x02\0\0\0garbage");
+    try {
+        read_mesh((dir / "corrupt.glb").string());
+        ADD_FAILURE() << "a corrupt .glb was read";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("corrupt.glb: cannot parse as glTF"), std::string::npos) << e.what();
+    }
+    std::ifstream whole(dir / "box.glb", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(whole)), std::istreambuf_iterator<char>());
+    write_text(dir / "truncated.glb", bytes.substr(0, bytes.size() / 2));
+    EXPECT_THROW(read_mesh((dir / "truncated.glb").string()), InvalidInput);
+    write_text(dir / "empty.gltf", "{\"asset\": {\"version\": \"2.0\"}}");
+    EXPECT_THROW(read_mesh((dir / "empty.gltf").string()), InvalidInput);
+}
+
 TEST(Attributes, BrokenReferencesAreNamedOrWarnedAbout) {
     const fs::path dir = scratch("broken");
     const std::string quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n";

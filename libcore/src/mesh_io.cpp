@@ -2,6 +2,7 @@
 #include <voxwarp/errors.h>
 #include <voxwarp/mesh_io.h>
 
+#include "gltf_io.h"
 #include "mesh_validate.h"
 
 #include <OpenMesh/Core/IO/IOManager.hh>
@@ -138,7 +139,7 @@ using namespace mesh_io_internal;
 
 bool is_mesh_path(const std::string& path) {
     const auto ext = lower_extension(path);
-    return ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" || ext == ".om";
+    return ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" || ext == ".om" || ext == ".gltf" || ext == ".glb";
 }
 
 TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnings) {
@@ -148,11 +149,18 @@ TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnin
     if (!fs::exists(path, ec)) throw IOError(path + ": no such file");
     if (fs::is_directory(path, ec)) throw IOError(path + ": is a directory, expected a mesh file");
     if (!is_mesh_path(path))
-        throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
+        throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl, .om, .gltf or .glb");
     if (std::ifstream probe(path, std::ios::binary); !probe) throw IOError(path + ": cannot open for reading");
     const auto file_size = fs::file_size(path, ec);
     if (file_size == 0) throw InvalidInput(path + ": file is empty");
     std::vector<std::string> ignored;
+    if (lower_extension(path) == ".gltf" || lower_extension(path) == ".glb") {
+        TriangleMesh mesh = read_gltf(path, lower_extension(path) == ".glb", warnings ? *warnings : ignored);
+        if (mesh.vertices.empty()) throw InvalidInput(path + ": no vertices");
+        if (mesh.triangles.empty()) throw InvalidInput(path + ": no faces");
+        check_attributes(mesh, path);
+        return mesh;
+    }
     if (TriangleMesh direct; read_mesh_directly(path, lower_extension(path), file_size, direct, warnings ? *warnings : ignored)) {
         if (direct.vertices.empty()) throw InvalidInput(path + ": no vertices");
         if (direct.triangles.empty()) throw InvalidInput(path + ": no faces");
@@ -193,14 +201,28 @@ TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnin
 void write_mesh(const TriangleMesh& mesh, const std::string& path) {
     static QuietOpenMesh quiet;
     if (!is_mesh_path(path))
-        throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl or .om");
+        throw InvalidInput(path + ": unknown mesh format '" + lower_extension(path) + "', expected .obj, .off, .ply, .stl, .om, .gltf or .glb");
     if (lower_extension(path) != ".om") {
+        if (lower_extension(path) == ".gltf" || lower_extension(path) == ".glb") return write_gltf(mesh, path, lower_extension(path) == ".glb");
         std::string library;
         if (lower_extension(path) == ".obj" && !mesh.materials.empty()) {
             const std::filesystem::path obj(path);
             library = obj.stem().string() + ".mtl";
             const std::string library_path = (obj.parent_path() / library).string();
-            const std::string text = encode_material_library(mesh.materials, obj.parent_path().string());
+            // A texture that came embedded (a .glb's) becomes a file beside the output, which the library names.
+            std::vector<Material> materials = mesh.materials;
+            for (auto& m : materials) {
+                if (m.texture_bytes.empty()) continue;
+                const std::string file = (obj.parent_path() / (obj.stem().string() + "_" + std::filesystem::path(m.texture).filename().string())).string();
+                write_atomically(file, [&](const std::string& tmp) {
+                    std::ofstream out(tmp, std::ios::binary);
+                    out.write(m.texture_bytes.data(), std::streamsize(m.texture_bytes.size()));
+                    out.close();
+                    if (!out) throw IOError(file + ": writing the texture failed");
+                });
+                m.texture = file, m.texture_bytes.clear();
+            }
+            const std::string text = encode_material_library(materials, obj.parent_path().string());
             write_atomically(library_path, [&](const std::string& tmp) {
                 std::ofstream out(tmp, std::ios::binary);
                 out << text;
