@@ -24,11 +24,11 @@ struct Material {
     std::string name;
     Eigen::Vector3d diffuse{0.8, 0.8, 0.8}; ///< Kd, RGB in [0, 1]
     std::string texture;                    ///< map_Kd: the diffuse texture's path, usable from the current directory; empty: none
-    std::string texture_bytes;              ///< the texture file's bytes when it came embedded (a .glb's); `texture` is then its name
     /// The material's other .mtl statements as read ("Ks 0 0 0", "map_Bump -bm 0.5 bump.png"), written back as they
     /// are, except that a texture map's file (the last word of a map_*, bump, disp, decal or norm line) is a path
     /// usable from the current directory, like `texture`.
     std::vector<std::string> statements;
+    std::string texture_bytes; ///< the texture file's bytes when it came embedded (a .glb's); `texture` is then its name
 };
 
 struct TriangleMesh {
