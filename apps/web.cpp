@@ -237,11 +237,28 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
         throw InvalidInput("render: size " + std::to_string(options.width) + "x" + std::to_string(options.height) + " is outside 16..8192 per side");
     for (std::size_t i = 0; i < meshes.size(); ++i)
         if (meshes[i].face_count() == 0) throw InvalidInput("render: mesh " + std::to_string(i + 1) + " has no faces");
-    std::vector<std::string> plys;
-    for (const auto& m : meshes) plys.push_back(encode_ply(m));
+    // A mesh with texture coordinates and a textured material is shown with its (first) texture; vertex colours are
+    // shown too. Both travel in the PLY (s t, red green blue), the texture's file beside it.
+    std::vector<std::string> plys, textures;
     nlohmann::json config{{"width", options.width}, {"height", options.height}, {"azimuth", options.azimuth}, {"elevation", options.elevation}};
     config["meshes"] = nlohmann::json::array();
-    for (std::size_t i = 0; i < meshes.size(); ++i) config["meshes"].push_back({{"label", i < labels.size() ? labels[i] : ""}});
+    for (std::size_t i = 0; i < meshes.size(); ++i) {
+        const TriangleMesh& m = meshes[i];
+        std::string texture;
+        if (!m.triangle_uvs.empty())
+            for (const auto& material : m.materials) {
+                if (!texture.empty() || material.texture.empty()) continue;
+                if (!material.texture_bytes.empty()) {
+                    texture = material.texture_bytes;
+                } else {
+                    std::ifstream in(material.texture, std::ios::binary);
+                    texture.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+                }
+            }
+        plys.push_back(texture.empty() && m.colours.empty() ? encode_ply(m) : encode_mesh(m, ".ply"));
+        textures.push_back(texture);
+        config["meshes"].push_back({{"label", i < labels.size() ? labels[i] : ""}, {"texture", !texture.empty()}, {"colours", !m.colours.empty()}});
+    }
 
     std::mutex mutex;
     std::condition_variable done;
@@ -254,6 +271,12 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
         const std::size_t i = std::stoul(q.matches[1]);
         if (i >= plys.size()) return send_error(r, 404, "no mesh " + std::to_string(i));
         r.set_content(plys[i], "application/ply");
+    });
+    server.Get(R"(/api/render/texture/(\d+))", [&](const httplib::Request& q, httplib::Response& r) {
+        const std::size_t i = std::stoul(q.matches[1]);
+        if (i >= textures.size() || textures[i].empty()) return send_error(r, 404, "no texture " + std::to_string(i));
+        const bool jpeg = textures[i].size() > 2 && static_cast<unsigned char>(textures[i][0]) == 0xff && static_cast<unsigned char>(textures[i][1]) == 0xd8;
+        r.set_content(textures[i], jpeg ? "image/jpeg" : "image/png");
     });
     server.Post("/api/render/png", [&](const httplib::Request& q, httplib::Response& r) {
         std::lock_guard lock(mutex);

@@ -119,6 +119,12 @@ for mesher in ("mc", "features"):
     meshes.append(path)
 render("cube_features.png", meshes, ["marching cubes", "--mesher features"], view="30,25", size="1000x500")
 
+# Spot, textured, with its head turned: the output an OBJ with its .mtl, which the render reads back.
+spot = os.path.join(work, "spot_head.obj")
+run("deform", os.path.join(data, "spot_triangulated.obj"), os.path.join(data, "spot_head.json"), "-o", spot, "-r", "128")
+render("spot_head.png", [os.path.join(data, "spot_triangulated.obj"), spot],
+       ["Spot (5856 triangles; texture 1024 x 1024)", "head turned 25 degrees: voxwarp deform at 128"], view="120,12", size="1200x560")
+
 # The editor with the ear edit loaded, as a browser shows it.
 from selenium import webdriver  # noqa: E402
 from selenium.webdriver.chrome.service import Service  # noqa: E402

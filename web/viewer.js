@@ -13,8 +13,9 @@ Viewer.api = function (path, init) {
   return fetch(path, init);
 };
 
-/// Binary little-endian PLY as voxwarp writes it (float x y z, then faces as a uchar count and int indices;
-/// polygons are fanned) into a BufferGeometry.
+/// Binary little-endian PLY as voxwarp writes it (float x y z, optionally float s t and uchar red green blue, then
+/// faces as a uchar count and int indices; polygons are fanned) into a BufferGeometry, with a uv attribute and
+/// vertex colours when the file has them.
 Viewer.parsePly = function (buffer) {
   const bytes = new Uint8Array(buffer);
   let end = 0;
@@ -29,11 +30,26 @@ Viewer.parsePly = function (buffer) {
   if (!/format binary_little_endian/.test(header)) throw new Error('expected binary little-endian PLY');
   const nv = parseInt(/element vertex (\d+)/.exec(header)[1], 10);
   const nf = parseInt(/element face (\d+)/.exec(header)[1], 10);
+  // The vertex properties, in order, with their byte offsets.
+  const vertexPart = header.slice(header.indexOf('element vertex'), header.indexOf('element face'));
+  const offsets = {};
+  let stride = 0;
+  for (const m of vertexPart.matchAll(/property (float|uchar) (\w+)/g)) {
+    offsets[m[2]] = { at: stride, type: m[1] };
+    stride += m[1] === 'float' ? 4 : 1;
+  }
   const view = new DataView(buffer, end);
   const positions = new Float32Array(3 * nv);
-  for (let i = 0; i < 3 * nv; ++i) positions[i] = view.getFloat32(4 * i, true);
+  const uvs = 's' in offsets && 't' in offsets ? new Float32Array(2 * nv) : null;
+  const colours = 'red' in offsets ? new Float32Array(3 * nv) : null;
+  for (let i = 0; i < nv; ++i) {
+    const base = stride * i;
+    for (let a = 0; a < 3; ++a) positions[3 * i + a] = view.getFloat32(base + offsets['xyz'[a]].at, true);
+    if (uvs) { uvs[2 * i] = view.getFloat32(base + offsets.s.at, true); uvs[2 * i + 1] = view.getFloat32(base + offsets.t.at, true); }
+    if (colours) ['red', 'green', 'blue'].forEach((c, a) => { colours[3 * i + a] = view.getUint8(base + offsets[c].at) / 255; });
+  }
   const indices = [];
-  let at = 12 * nv;
+  let at = stride * nv;
   for (let f = 0; f < nf; ++f) {
     const n = view.getUint8(at); at += 1;
     const first = view.getInt32(at, true);
@@ -47,6 +63,8 @@ Viewer.parsePly = function (buffer) {
   }
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute('position', new THREE.BufferAttribute(positions, 3));
+  if (uvs) geometry.setAttribute('uv', new THREE.BufferAttribute(uvs, 2));
+  if (colours) geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
   geometry.setIndex(nv > 65535 ? new THREE.Uint32BufferAttribute(indices, 1) : new THREE.Uint16BufferAttribute(indices, 1));
   geometry.computeVertexNormals();
   geometry.computeBoundingBox();

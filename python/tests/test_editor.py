@@ -164,6 +164,22 @@ def test_render_writes_a_picture_of_the_meshes(tmp_path):
     assert size == (1200, 600) and share > 0.05
 
 
+def test_render_shows_the_texture(tmp_path):
+    # Spot's horns and muzzle are orange in its texture only: the mesh without texture coordinates is shaded grey.
+    from PIL import Image
+
+    V, F = voxwarp.read_mesh(data("spot_triangulated.obj"))
+    voxwarp.write_mesh(tmp_path / "plain.obj", V, F)
+    shares = []
+    for mesh in (data("spot_triangulated.obj"), tmp_path / "plain.obj"):
+        out = tmp_path / "spot.png"
+        r = run_cli("render", mesh, "-o", out, "--size", "400x400", "--view", "120,12", "-q")
+        assert r.returncode == 0, r.stderr
+        pixels = list(Image.open(out).convert("RGB").getdata())
+        shares.append(sum(1 for p in pixels if p[0] - p[2] > 60) / len(pixels))
+    assert shares[0] > 0.005 and shares[1] < 0.001, shares
+
+
 def test_render_refuses_clearly(tmp_path):
     r = run_cli("render", data("bunny.obj"), "-o", tmp_path / "x.png", "--size", "10x10")
     assert r.returncode == 2 and "--size 10x10" in r.stderr
