@@ -56,6 +56,15 @@ class EditServer:
         self.process.wait(timeout=20)
 
 
+@pytest.fixture
+def server():
+    """The editor's server on the bunny at 128, stopped after the test; it must exit cleanly."""
+    s = EditServer(data("bunny.obj"), "--resolution", "128")
+    yield s
+    s.stop()
+    assert s.process.returncode == 0, s.process.stderr.read()
+
+
 def box(lo=(-2, -0.5, -0.5), hi=(2, 0.5, 0.5)):
     """An axis-aligned box: 8 vertices, 12 outward triangles."""
     (x0, y0, z0), (x1, y1, z1) = lo, hi

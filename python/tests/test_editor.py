@@ -12,7 +12,7 @@ import time
 import pytest
 
 import voxwarp
-from conftest import CLI, EditServer, data, run_cli
+from conftest import CLI, data, run_cli
 
 selenium = pytest.importorskip("selenium")
 from selenium import webdriver  # noqa: E402
@@ -20,14 +20,6 @@ from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
 
 CHROMEDRIVER = "/usr/bin/chromedriver"
-
-
-@pytest.fixture
-def server():
-    s = EditServer(data("bunny.obj"), "--resolution", "128")
-    yield s
-    s.stop()
-    assert s.process.returncode == 0, s.process.stderr.read()
 
 
 # Chromium leaves its singleton-socket folder in $TMPDIR; this one goes when the tests end.

@@ -15,14 +15,6 @@ from conftest import CLI, EditServer, data
 PLY = b"ply\nformat binary_little_endian"
 
 
-@pytest.fixture
-def server():
-    s = EditServer(data("bunny.obj"), "--resolution", "128")
-    yield s
-    s.stop()
-    assert s.process.returncode == 0, s.process.stderr.read()
-
-
 @pytest.fixture(scope="module")
 def box_server():
     s = EditServer(data("box.obj"), "--resolution", "32")
