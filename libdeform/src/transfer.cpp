@@ -156,11 +156,7 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
         return std::int32_t(-1);
     };
 
-    // The seam vertex of output edge (a, b) whose ends lie in different charts: bisection along the segment between
-    // their source points, each midpoint taken to the input surface (nearest point facing the same way), until the
-    // two sides' faces share an edge (the seam's): then where the segment passes closest to that edge. Placed at the
-    // same fraction of the output edge. Every such edge is found first, then all are bisected in parallel.
-    // Per triangle, the chart each edge's two ends share (-1: the edge crosses a seam; all -1 for a triangle with a
+    // Per triangle, the chart each edge's two ends share (-1: the edge crosses a seam; all -2 for a triangle with a
     // corner without source, which keeps no attributes).
     const std::size_t nt = output.triangles.size();
     std::vector<std::array<std::int32_t, 3>> edge_chart(nt);
@@ -173,6 +169,10 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     for (std::size_t f = 0; f < nt; ++f)
         for (std::size_t c = 0; c < 3; ++c)
             if (edge_chart[f][c] == -1) crossing_edges.push_back(edge_key(output.triangles[f][c], output.triangles[f][(c + 1) % 3]));
+    // The seam vertex of each output edge whose ends share no chart: bisection along the segment between their
+    // source points, each midpoint taken to the input surface (nearest point facing the same way), until the two
+    // sides' faces share an edge (the seam's): then where the segment passes closest to that edge. Placed at the
+    // same fraction of the output edge. All crossing edges are bisected in parallel.
     std::sort(crossing_edges.begin(), crossing_edges.end());
     crossing_edges.erase(std::unique(crossing_edges.begin(), crossing_edges.end()), crossing_edges.end());
     struct Crossing {
