@@ -39,8 +39,16 @@ def test_eight_jobs_on_two_workers_one_failing(tmp_path):
         V, F = voxwarp.read_mesh(job["output"])
         assert len(F) == report["output_faces"]
     assert seen[-1] == (8, 8)
+    # Both workers ran jobs, and what they wrote is what a direct deform writes.
+    assert len({r["worker"] for r in results if r["status"] == "done"}) == 2, results
+    for i in (0, 7):
+        V, F = voxwarp.read_mesh(jobs[i]["mesh"])
+        V2, F2, _ = voxwarp.deform(V, F, jobs[i]["edit"], resolution=jobs[i]["resolution"])
+        voxwarp.write_mesh(tmp_path / "direct.ply", V2, F2)
+        assert (tmp_path / "direct.ply").read_bytes() == open(jobs[i]["output"], "rb").read(), i
     # No temporary files left behind.
     assert not [p for p in os.listdir(tmp_path) if p.endswith(".tmp")]
+    os.remove(tmp_path / "direct.ply")
 
     # A rerun skips the complete jobs and retries the failed one.
     again = batch.deform_many(jobs, workers=2)

@@ -55,7 +55,8 @@ _DEFORM_KEYWORDS = ("resolution", "voxel_size", "mode", "preview", "max_steps", 
 
 
 def run_job(job):
-    """Run one job here (a worker calls this). Returns {"output", "status": "done", "seconds", "report"} or
+    """Run one job here (a worker calls this). Returns {"output", "status": "done", "seconds", "report", "worker" (its
+    process id)} or
     {"output", "status": "failed", "error": kind, "message"}; never raises for a job's own failure."""
     import voxwarp
 
@@ -67,15 +68,15 @@ def run_job(job):
         for field in ("mesh", "edit", "output"):
             if field not in job:
                 raise voxwarp.InvalidInput("job: missing field \"%s\"" % field)
-        V, F = voxwarp.read_mesh(job["mesh"])
+        V, F, attributes = voxwarp.read_mesh(job["mesh"], attributes=True)
         options = {k: job[k] for k in _DEFORM_KEYWORDS if k in job}
-        V2, F2, report = voxwarp.deform(V, F, job["edit"], **options)
-        voxwarp.write_mesh(job["output"], V2, F2)
+        V2, F2, report, attributes = voxwarp.deform(V, F, job["edit"], attributes=attributes, **options)
+        voxwarp.write_mesh(job["output"], V2, F2, attributes)  # texture coordinates, colours and materials carried
         report.update({"input": os.fspath(job["mesh"]), "output": os.fspath(job["output"]), "output_bytes": os.path.getsize(job["output"])})
         if not isinstance(job["edit"], dict):
             report["edits_file"] = os.fspath(job["edit"])
         _write_atomically(report_path(job["output"]), json.dumps(report, indent=2) + "\n")
-        return {"output": os.fspath(job["output"]), "status": "done", "seconds": time.perf_counter() - start, "report": report}
+        return {"output": os.fspath(job["output"]), "status": "done", "seconds": time.perf_counter() - start, "report": report, "worker": os.getpid()}
     except voxwarp.Error as e:
         return {"output": os.fspath(job.get("output", "")), "status": "failed", "error": type(e).__name__, "message": str(e)}
     except Exception as e:  # a worker must report, not die: anything else is an internal error of that job
