@@ -3,6 +3,8 @@
 
 #include <voxwarp/mesh_io.h>
 
+#include <nlohmann/json.hpp>
+
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -232,8 +234,30 @@ TEST_F(Cli, RemeshCarriesTheTextureAndItsLibrary) {
 }
 
 TEST_F(Cli, CompareReportsJson) {
-    const Outcome r = run("compare " + test::data_path("bunny.obj") + " " + test::data_path("bunny.obj") + " --json --samples 1000");
-    EXPECT_EQ(r.code, 0) << r.err;
+    // The bunny against itself moved by 0.05 along x (a hundredth of its size): every point of either lies within
+    // 0.05 of the other, and the facts of both are the bunny's.
+    TriangleMesh moved = read_mesh(test::data_path("bunny.obj"));
+    for (auto& v : moved.vertices) v.x() += 0.05;
+    write_mesh(moved, file("moved.obj"));
+    const Outcome r = run("compare " + test::data_path("bunny.obj") + " " + file("moved.obj") + " --json --samples 1000 > " + file("compare.json") + " #");
+    ASSERT_EQ(r.code, 0) << r.err;
+    std::ifstream in(file("compare.json"));
+    const nlohmann::json j = nlohmann::json::parse(in);
+    for (const char* side : {"a", "b"}) {
+        EXPECT_EQ(j[side]["faces"], 3674);
+        EXPECT_EQ(j[side]["euler"], 2);
+        EXPECT_EQ(j[side]["components"], 1);
+        EXPECT_TRUE(j[side]["closed"].get<bool>() && j[side]["manifold"].get<bool>());
+        EXPECT_NEAR(j[side]["enclosed_volume"].get<double>(), enclosed_volume(moved), 1e-9 * enclosed_volume(moved));
+    }
+    for (const char* way : {"a_to_b", "b_to_a"}) {
+        const auto& d = j["distance"][way];
+        EXPECT_GT(d["mean"].get<double>(), 0.0);
+        EXPECT_LE(d["mean"].get<double>(), d["p99"].get<double>());
+        EXPECT_LE(d["p99"].get<double>(), d["max"].get<double>());
+        EXPECT_LE(d["max"].get<double>(), 0.05 + 1e-9);
+        EXPECT_GE(d["samples"].get<int>(), 1000);
+    }
 }
 
 } // namespace

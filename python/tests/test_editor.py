@@ -9,15 +9,13 @@ import subprocess
 import tempfile
 import time
 
-import pytest
+# selenium: the README's commands install it; without it this module fails rather than skips.
+from selenium import webdriver
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.action_chains import ActionChains
 
 import voxwarp
 from conftest import CLI, data, run_cli
-
-selenium = pytest.importorskip("selenium")
-from selenium import webdriver  # noqa: E402
-from selenium.webdriver.chrome.service import Service  # noqa: E402
-from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
 
 CHROMEDRIVER = "/usr/bin/chromedriver"
 
