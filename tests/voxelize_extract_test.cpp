@@ -12,11 +12,12 @@
 
 #include <gtest/gtest.h>
 
-#include <tuple>
-
 #include <algorithm>
+#include <map>
+#include <numbers>
 #include <numeric>
 #include <random>
+#include <tuple>
 
 namespace voxwarp {
 namespace {
@@ -113,8 +114,12 @@ TEST(RoundTrip, BunnyMatchesOpenVDBAccuracy) {
     const DistanceStats vdb = symmetric_distance(bunny, openvdb_round_trip(bunny, 128));
     std::printf("bunny@128 symmetric distance: voxwarp mean %.4f p99 %.4f | OpenVDB mean %.4f p99 %.4f (voxels)\n", ours.mean / h,
                 ours.p99 / h, vdb.mean / h, vdb.p99 / h);
+    // As accurate as OpenVDB's own round trip at the same voxel size, measured here (0.0159 / 0.153 against
+    // 0.0246 / 0.185 when written), and within about twice of what it measured then.
+    EXPECT_LE(ours.mean, vdb.mean);
+    EXPECT_LE(ours.p99, vdb.p99);
     EXPECT_LE(ours.mean / h, 0.03);
-    EXPECT_LE(ours.p99 / h, 0.2);
+    EXPECT_LE(ours.p99 / h, 0.3);
 }
 
 TEST(RoundTrip, SmoothShapesAreNoWorseWithTheFeatureMesher) {
@@ -403,7 +408,8 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
     // prism's rims), corners where four faces meet (an octahedron), a concave edge (an L-shaped block), and acute
     // ones (a triangular prism, a tetrahedron) whose tips are thinner than a voxel within about a voxel of the tip,
     // where voxelizing loses them. The feature mesher must keep marching cubes' topology, put no vertex further
-    // from the surface than marching cubes does, and bring the input's sharp edges closer to the output.
+    // from the surface than marching cubes does, and bring the shape's sharp edges (all of them, from its faces)
+    // closer to the output.
     const std::vector<std::pair<std::string, TriangleMesh>> shapes{
         {"hexagonal prism", test::prism_mesh(test::regular_polygon(6), 0.8)},
         {"24-gon prism", test::prism_mesh(test::regular_polygon(24), 1.0)},
@@ -424,9 +430,19 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
             const SparseVoxmap v = voxelize_sparse(input, {.resolution = 32});
             const double h = v.voxel_size();
             const FeatureSurface features = sharp_feature_surface(input, h);
-            ASSERT_FALSE(features.edges.empty());
+            // The shape's sharp edges from its definition (faces meeting at more than 30 degrees), not from what the
+            // mesher detected: an edge it misses is measured too.
+            std::map<std::pair<std::int32_t, std::int32_t>, std::vector<Eigen::Vector3d>> normals;
+            for (const auto& t : input.triangles) {
+                const Eigen::Vector3d n = (input.vertices[t[1]] - input.vertices[t[0]]).cross(input.vertices[t[2]] - input.vertices[t[0]]).normalized();
+                for (int e = 0; e < 3; ++e) normals[std::minmax(t[e], t[(e + 1) % 3])].push_back(n);
+            }
             std::vector<Eigen::Vector3d> edge_points;
-            for (const auto& [a, b] : features.edges) edge_points.push_back(a), edge_points.push_back(0.5 * (a + b));
+            for (const auto& [edge, n] : normals)
+                if (n.size() == 2 && n[0].dot(n[1]) < std::cos(30.0 * std::numbers::pi / 180.0))
+                    for (const double t : {0.0, 0.25, 0.5, 0.75})
+                        edge_points.push_back((1 - t) * input.vertices[std::size_t(edge.first)] + t * input.vertices[std::size_t(edge.second)]);
+            ASSERT_FALSE(edge_points.empty());
             struct Figures {
                 double edge_mean = 0, edge_max = 0, vertex_max = 0;
             };
@@ -446,8 +462,12 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
             EXPECT_EQ(topology(sharp).euler, topology(mc).euler);
             EXPECT_LE(s.vertex_max, std::max(0.1, m.vertex_max));
             EXPECT_LE(s.edge_max, m.edge_max);
-            EXPECT_LE(s.edge_mean, 0.25 * m.edge_mean);
-            if (name == "hexagonal prism" || name == "24-gon prism") {
+            if (name == "triangular prism" || name == "tetrahedron") {
+                // Tips thinner than a voxel are lost by voxelizing (the tetrahedron's first turn: edges mean 0.21,
+                // max 1.56 voxels, against marching cubes' 0.68 / 1.60): about a third of marching cubes' error at worst.
+                EXPECT_LE(s.edge_mean, 0.4 * m.edge_mean);
+            } else { // measured: mean at most 0.0061, max 0.068 voxel (the 24-gon's rims); 0 on flat-faced shapes
+                EXPECT_LE(s.edge_mean, 0.015);
                 EXPECT_LE(s.edge_max, 0.15);
             }
         }
