@@ -60,11 +60,16 @@ void expect_closed_manifold(const Outcome& o) {
     EXPECT_EQ(o.topology.euler, 2);
 }
 
-/// The deformation's own figures for one configuration, checked against the goals.
-void expect_natural(const Outcome& o) {
-    EXPECT_LE(o.distance.mean, 1.0);
-    EXPECT_LE(o.distance.max, 4.0);
-    EXPECT_LE(std::abs(o.volume_change), 0.02);
+/// Bounds for one configuration: about 1.5 x its measured figures (voxels; volume change as a fraction).
+struct Bounds {
+    double mean, max, volume;
+};
+
+/// The deformation's own figures for one configuration, against its bounds.
+void expect_natural(const Outcome& o, const Bounds& b) {
+    EXPECT_LE(o.distance.mean, b.mean);
+    EXPECT_LE(o.distance.max, b.max);
+    EXPECT_LE(std::abs(o.volume_change), b.volume);
     expect_closed_manifold(o);
     EXPECT_FALSE(o.report.edits[0].folds_remain);
     for (const auto& c : o.report.edits[0].constraints) EXPECT_LE(c.residual_voxels, 1e-6) << c.name;
@@ -76,16 +81,18 @@ TEST(Rigid, NinetyDegreeBendLandsOnTheCircularArc) {
         std::array<int, 3> lattice;
         double h;
         const char* name;
+        Bounds bounds; // measured: mean 0.815 / 0.376 / 0.271, max 3.45 / 1.90 / 1.48 voxels, volume +0.65 / +0.57 / +0.33 %
     };
-    for (const Config& c : {Config{{4, 1}, {9, 9, 9}, 1.0 / 32, "4x1x1, 9x9x9, h 1/32"}, Config{{4, 1}, {9, 5, 5}, 1.0 / 32, "4x1x1, 9x5x5, h 1/32"},
-                            Config{{6, 0.75}, {12, 6, 6}, 1.0 / 48, "6x.75x.75, 12x6x6, h 1/48"}}) {
+    for (const Config& c : {Config{{4, 1}, {9, 9, 9}, 1.0 / 32, "4x1x1, 9x9x9, h 1/32", {1.0, 4.5, 0.01}},
+                            Config{{4, 1}, {9, 5, 5}, 1.0 / 32, "4x1x1, 9x5x5, h 1/32", {0.6, 3.0, 0.01}},
+                            Config{{6, 0.75}, {12, 6, 6}, 1.0 / 48, "6x.75x.75, 12x6x6, h 1/48", {0.45, 2.3, 0.006}}}) {
         SCOPED_TRACE(c.name);
         const Map bend = c.bar.bend(std::numbers::pi / 2);
         const Outcome rigid = run(c.bar, bend, Solver::rigid, c.lattice, c.h);
         const Outcome min_norm = run(c.bar, bend, Solver::min_norm, c.lattice, c.h);
         print((std::string("bend rigid    ") + c.name).c_str(), rigid);
         print((std::string("bend min-norm ") + c.name).c_str(), min_norm);
-        expect_natural(rigid);
+        expect_natural(rigid, c.bounds);
         EXPECT_LT(rigid.distance.mean, min_norm.distance.mean / 3); // min-norm crumples: the rigid answer is the bend
     }
 }
@@ -97,7 +104,7 @@ TEST(Rigid, NinetyDegreeTwistTurnsTheCrossSections) {
         const Outcome min_norm = run(bar, twist, Solver::min_norm, {9, 9, 9}, h);
         print("twist rigid    9x9x9", rigid);
         print("twist min-norm 9x9x9", min_norm);
-        expect_natural(rigid);
+        expect_natural(rigid, {0.5, 2.3, 0.004}); // measured: mean 0.33 / 0.31, max 1.53 / 1.51 voxels, volume +0.16 / +0.13 %
         EXPECT_LT(rigid.distance.mean, min_norm.distance.mean / 2);
     }
 }
