@@ -219,6 +219,15 @@ TEST_F(Cli, RemeshCarriesTheTextureAndItsLibrary) {
     json << report.rdbuf();
     EXPECT_NE(json.str().find("\"attributes\": true"), std::string::npos) << json.str();
 
+    // An output named like the input's library never overwrites it: its own library takes another name.
+    std::ifstream before(dir / "in" / "spot.mtl");
+    const std::string input_library((std::istreambuf_iterator<char>(before)), std::istreambuf_iterator<char>());
+    ASSERT_EQ(run("remesh " + file("in/spot_triangulated.obj") + " -o " + file("in/spot.obj") + " -r 32 -q").code, 0);
+    std::ifstream after(dir / "in" / "spot.mtl");
+    EXPECT_EQ(std::string((std::istreambuf_iterator<char>(after)), std::istreambuf_iterator<char>()), input_library);
+    EXPECT_TRUE(fs::exists(dir / "in" / "spot_voxwarp.mtl"));
+    EXPECT_EQ(read_mesh(file("in/spot.obj")).materials.at(0).texture, (dir / "in" / "spot_texture.png").string());
+
     // Broken references: a missing texture is a warning and the run goes on; a texture coordinate index out of
     // range is refused with the file and line, and nothing is written.
     fs::remove(dir / "in" / "spot_texture.png");

@@ -208,6 +208,12 @@ void write_mesh(const TriangleMesh& mesh, const std::string& path) {
         if (lower_extension(path) == ".obj" && !mesh.materials.empty()) {
             const std::filesystem::path obj(path);
             library = obj.stem().string() + ".mtl";
+            // A library of that name that voxwarp did not write (the input's own, say) is never overwritten.
+            if (std::ifstream existing(obj.parent_path() / library); existing) {
+                std::string first;
+                std::getline(existing, first);
+                if (first != "# voxwarp") library = obj.stem().string() + "_voxwarp.mtl";
+            }
             const std::string library_path = (obj.parent_path() / library).string();
             // A texture that came embedded (a .glb's) becomes a file beside the output, which the library names.
             std::vector<Material> materials = mesh.materials;
