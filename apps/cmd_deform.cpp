@@ -107,8 +107,12 @@ void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script,
     write_mesh(out, a.output);
     report.seconds_write = seconds_since(t);
     finish(global, a, report, start);
+    std::string carried;
+    for (const auto& [has, what] : {std::pair{!out.triangle_uvs.empty(), "texture coordinates"}, std::pair{!out.colours.empty(), "colours"},
+                                    std::pair{!out.materials.empty(), "materials"}})
+        if (has) carried += (carried.empty() ? " (with its " : ", ") + std::string(what);
     note(global, "wrote " + a.output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces" +
-                     (report.attributes ? " (texture coordinates, colours and materials carried)" : ""));
+                     (carried.empty() ? "" : carried + ")"));
     if (!a.png.empty()) {
         render_png({mesh, out}, {"before", "after"}, {}, a.png);
         note(global, "wrote " + a.png);
