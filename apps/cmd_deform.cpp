@@ -62,11 +62,7 @@ void finish(const Global& global, const DeformArgs& a, DeformReport& r, Clock::t
     note(global, line);
     if (!a.report.empty()) {
         const auto text = report_json(r, {{"input", a.input}, {"edits_file", a.edits}, {"output", a.output}});
-        write_atomically(a.report, [&](const std::string& tmp) {
-            std::ofstream out(tmp);
-            out << text;
-            if (!out) throw IOError(a.report + ": writing the report failed");
-        });
+        write_file_atomically(a.report, text, "the report");
     }
 }
 

@@ -320,12 +320,7 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     }
     if (!failure.empty()) throw IOError(failure);
     if (png.size() < 8 || png.compare(1, 3, "PNG") != 0) throw IOError("render: the page sent something that is not a PNG");
-    write_atomically(output, [&](const std::string& tmp) {
-        std::ofstream out(tmp, std::ios::binary);
-        out.write(png.data(), std::streamsize(png.size()));
-        out.close();
-        if (!out) throw IOError(output + ": writing the picture failed");
-    });
+    write_file_atomically(output, png, "the picture");
 }
 
 } // namespace voxwarp::cli

@@ -2,6 +2,7 @@
 #include <voxwarp/errors.h>
 
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <system_error>
 
@@ -27,6 +28,15 @@ void write_atomically(const std::string& path, const std::function<void(const st
         fs::remove(tmp, ec);
         throw;
     }
+}
+
+void write_file_atomically(const std::string& path, std::string_view bytes, const std::string& what) {
+    write_atomically(path, [&](const std::string& tmp) {
+        std::ofstream out(tmp, std::ios::binary);
+        out.write(bytes.data(), std::streamsize(bytes.size()));
+        out.close();
+        if (!out) throw IOError(path + ": writing " + what + " failed");
+    });
 }
 
 } // namespace voxwarp

@@ -4,6 +4,7 @@
 // voxelizing, each corner keeping its own texture coordinate. glTF's texture v runs down the image, OBJ's up:
 // voxwarp keeps OBJ's, flipping on the way in and out.
 #include "gltf_io.h"
+#include "mesh_validate.h"
 
 #include <voxwarp/atomic_file.h>
 #include <voxwarp/errors.h>
@@ -338,16 +339,10 @@ void write_gltf(const TriangleMesh& mesh, const std::string& path, bool binary) 
                 image.bufferView = view(data.data(), data.size(), 0);
             } else if (!m.texture_bytes.empty()) { // an embedded texture going to a .gltf: a file beside it
                 const std::string name = fs::path(path).stem().string() + "_" + fs::path(m.texture).filename().string();
-                write_atomically((folder / name).string(), [&](const std::string& tmp) {
-                    std::ofstream out(tmp, std::ios::binary);
-                    out.write(data.data(), std::streamsize(data.size()));
-                    if (!out) throw IOError((folder / name).string() + ": writing the texture failed");
-                });
+                write_file_atomically((folder / name).string(), data, "the texture");
                 image.uri = name;
             } else {
-                std::error_code ec;
-                const fs::path relative = fs::relative(fs::absolute(m.texture, ec), fs::absolute(folder.empty() ? fs::path(".") : folder), ec);
-                image.uri = (ec || relative.empty() ? fs::absolute(m.texture) : relative).generic_string();
+                image.uri = path_from_folder(m.texture, folder.string());
             }
             model.images.push_back(image);
             tinygltf::Texture texture;

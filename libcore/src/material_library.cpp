@@ -95,14 +95,7 @@ std::vector<Material> read_material_library(const std::string& path, std::vector
 }
 
 std::string encode_material_library(const std::vector<Material>& materials, const std::string& folder) {
-    const fs::path base = fs::absolute(folder.empty() ? fs::path(".") : fs::path(folder));
-    // A texture path as seen from the library's folder: relative when it can be, else absolute.
-    auto from_folder = [&](const std::string& file) {
-        std::error_code ec;
-        const fs::path absolute = fs::absolute(file, ec);
-        const fs::path relative = fs::relative(absolute, base, ec);
-        return (ec || relative.empty() ? absolute : relative).generic_string();
-    };
+    auto from_folder = [&](const std::string& file) { return mesh_io_internal::path_from_folder(file, folder); };
     std::ostringstream out;
     out << "# voxwarp\n";
     for (const auto& m : materials) {
@@ -119,6 +112,13 @@ std::string encode_material_library(const std::vector<Material>& materials, cons
 }
 
 namespace mesh_io_internal {
+
+std::string path_from_folder(const std::string& file, const std::string& folder) {
+    std::error_code ec;
+    const fs::path absolute = fs::absolute(file, ec);
+    const fs::path relative = fs::relative(absolute, fs::absolute(folder.empty() ? fs::path(".") : fs::path(folder)), ec);
+    return (ec || relative.empty() ? absolute : relative).generic_string();
+}
 
 void fill_materials(const std::string& obj_path, const std::vector<std::string>& libraries, std::vector<Material>& materials, std::vector<std::string>& warnings) {
     const fs::path folder = fs::path(obj_path).parent_path();

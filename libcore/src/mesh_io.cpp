@@ -220,21 +220,10 @@ void write_mesh(const TriangleMesh& mesh, const std::string& path) {
             for (auto& m : materials) {
                 if (m.texture_bytes.empty()) continue;
                 const std::string file = (obj.parent_path() / (obj.stem().string() + "_" + std::filesystem::path(m.texture).filename().string())).string();
-                write_atomically(file, [&](const std::string& tmp) {
-                    std::ofstream out(tmp, std::ios::binary);
-                    out.write(m.texture_bytes.data(), std::streamsize(m.texture_bytes.size()));
-                    out.close();
-                    if (!out) throw IOError(file + ": writing the texture failed");
-                });
+                write_file_atomically(file, m.texture_bytes, "the texture");
                 m.texture = file, m.texture_bytes.clear();
             }
-            const std::string text = encode_material_library(materials, obj.parent_path().string());
-            write_atomically(library_path, [&](const std::string& tmp) {
-                std::ofstream out(tmp, std::ios::binary);
-                out << text;
-                out.close();
-                if (!out) throw IOError(library_path + ": writing the material library failed");
-            });
+            write_file_atomically(library_path, encode_material_library(materials, obj.parent_path().string()), "the material library");
         }
         const auto chunks = encode_mesh_chunks(mesh, lower_extension(path), library);
         write_atomically(path, [&](const std::string& tmp) {

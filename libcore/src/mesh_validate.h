@@ -19,6 +19,10 @@ std::string read_head(const std::string& path, std::uintmax_t file_size);
 /// Problems that do not stop the reading (a missing material library or texture) go to `warnings`.
 bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh, std::vector<std::string>& warnings);
 
+/// `file` (a path usable from the current directory) as seen from `folder`: relative when it can be, else absolute.
+/// How texture paths are written into a material library or a .gltf beside an output.
+std::string path_from_folder(const std::string& file, const std::string& folder);
+
 /// Fill `materials` (named by an OBJ's usemtl) from the OBJ's material libraries (mtllib names, relative to the OBJ's
 /// folder). A library or texture that cannot be found, or a material no library defines, is a warning.
 void fill_materials(const std::string& obj_path, const std::vector<std::string>& libraries, std::vector<Material>& materials, std::vector<std::string>& warnings);

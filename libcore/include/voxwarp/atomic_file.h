@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <string>
+#include <string_view>
 
 namespace voxwarp {
 
@@ -11,5 +12,8 @@ namespace voxwarp {
 /// On any exception the temporary file is removed and `path` is left untouched.
 /// @throw IOError when the rename fails or write() leaves no file; rethrows what write() throws.
 void write_atomically(const std::string& path, const std::function<void(const std::string& tmp_path)>& write);
+
+/// write_atomically for a file that is `bytes` and nothing else. @throw IOError "PATH: writing WHAT failed".
+void write_file_atomically(const std::string& path, std::string_view bytes, const std::string& what);
 
 } // namespace voxwarp
