@@ -276,21 +276,13 @@ void write_gltf(const TriangleMesh& mesh, const std::string& path, bool binary) 
         return int(model.accessors.size() - 1);
     };
 
-    // glTF vertices: one per (vertex, texture coordinate) pair, as glTF keeps texture coordinates per vertex.
+    // glTF keeps texture coordinates per vertex: a vertex on a seam is written once per texture coordinate.
     const bool uvs = !mesh.triangle_uvs.empty();
-    std::vector<std::int32_t> vertex_of, uv_of;
+    const SeamSplit split = split_at_seams(mesh);
+    const std::vector<std::int32_t>&vertex_of = split.vertex_of, &uv_of = split.uv_of;
     std::vector<std::array<std::uint32_t, 3>> faces(mesh.triangles.size());
-    {
-        std::unordered_map<std::uint64_t, std::uint32_t> ids;
-        for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
-            for (std::size_t c = 0; c < 3; ++c) {
-                const std::int32_t v = mesh.triangles[f][c], u = uvs ? mesh.triangle_uvs[f][c] : -1;
-                const std::uint64_t key = (std::uint64_t(std::uint32_t(v)) << 32) | std::uint32_t(u);
-                const auto [it, added] = ids.try_emplace(key, std::uint32_t(vertex_of.size()));
-                if (added) vertex_of.push_back(v), uv_of.push_back(u);
-                faces[f][c] = it->second;
-            }
-    }
+    for (std::size_t f = 0; f < faces.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c) faces[f][c] = std::uint32_t(split.triangles[f][c]);
     std::vector<float> positions, texcoords, colours;
     std::vector<double> lo(3, std::numeric_limits<double>::infinity()), hi(3, -std::numeric_limits<double>::infinity());
     for (std::size_t i = 0; i < vertex_of.size(); ++i) {

@@ -2,6 +2,8 @@
 // that reads back as the same double), encoded in parallel chunks that are written in order. OpenMesh's writers
 // build a halfedge mesh first and print through iostreams: for a 1.7 M-triangle output that took longer than
 // extracting it.
+#include "mesh_validate.h"
+
 #include <voxwarp/errors.h>
 #include <voxwarp/mesh_io.h>
 
@@ -15,7 +17,43 @@
 
 namespace voxwarp {
 
+namespace mesh_io_internal {
+
+SeamSplit split_at_seams(const TriangleMesh& mesh) {
+    SeamSplit split;
+    split.vertex_of.resize(mesh.vertices.size());
+    split.uv_of.assign(mesh.vertices.size(), -1);
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) split.vertex_of[v] = std::int32_t(v);
+    std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> copies(mesh.vertices.size()); // (uv, written vertex) beyond the first
+    split.triangles = mesh.triangles;
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c) {
+            const std::int32_t v = mesh.triangles[f][c], uv = mesh.triangle_uvs.empty() ? -1 : mesh.triangle_uvs[f][c];
+            if (uv < 0) continue;
+            if (split.uv_of[std::size_t(v)] < 0 || split.uv_of[std::size_t(v)] == uv) {
+                split.uv_of[std::size_t(v)] = uv;
+                continue;
+            }
+            std::int32_t written = -1;
+            for (const auto& [u, w] : copies[std::size_t(v)])
+                if (u == uv) written = w;
+            if (written < 0) {
+                written = std::int32_t(split.vertex_of.size());
+                split.vertex_of.push_back(v);
+                split.uv_of.push_back(uv);
+                copies[std::size_t(v)].emplace_back(uv, written);
+            }
+            split.triangles[f][c] = written;
+        }
+    return split;
+}
+
+} // namespace mesh_io_internal
+
 namespace mesh_write_internal {
+
+using mesh_io_internal::SeamSplit;
+using mesh_io_internal::split_at_seams;
 
 constexpr std::size_t kChunk = 1 << 16; // elements per chunk
 
@@ -162,43 +200,6 @@ Chunks stl(const TriangleMesh& mesh) {
         }
     });
     return chunks;
-}
-
-/// Per-vertex texture coordinates for PLY: a vertex whose corners name different ones (a seam) is written once per
-/// texture coordinate. `vertex_of[i]`: the mesh vertex that written vertex i copies; `uv_of[i]`: its texture
-/// coordinate (-1: none); the faces index written vertices.
-struct SeamSplit {
-    std::vector<std::int32_t> vertex_of, uv_of;
-    std::vector<std::array<std::int32_t, 3>> triangles;
-};
-
-SeamSplit split_at_seams(const TriangleMesh& mesh) {
-    SeamSplit split;
-    split.vertex_of.resize(mesh.vertices.size());
-    split.uv_of.assign(mesh.vertices.size(), -1);
-    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) split.vertex_of[v] = std::int32_t(v);
-    std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> copies(mesh.vertices.size()); // (uv, written vertex) beyond the first
-    split.triangles = mesh.triangles;
-    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
-        for (std::size_t c = 0; c < 3; ++c) {
-            const std::int32_t v = mesh.triangles[f][c], uv = mesh.triangle_uvs[f][c];
-            if (uv < 0) continue;
-            if (split.uv_of[std::size_t(v)] < 0 || split.uv_of[std::size_t(v)] == uv) {
-                split.uv_of[std::size_t(v)] = uv;
-                continue;
-            }
-            std::int32_t written = -1;
-            for (const auto& [u, w] : copies[std::size_t(v)])
-                if (u == uv) written = w;
-            if (written < 0) {
-                written = std::int32_t(split.vertex_of.size());
-                split.vertex_of.push_back(v);
-                split.uv_of.push_back(uv);
-                copies[std::size_t(v)].emplace_back(uv, written);
-            }
-            split.triangles[f][c] = written;
-        }
-    return split;
 }
 
 Chunks ply(const TriangleMesh& mesh, bool attributes) {
