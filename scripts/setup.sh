@@ -10,7 +10,7 @@ packages=(cmake ninja-build g++ pkg-config
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   python3 python3-dev pybind11-dev python3-numpy python3-pytest python3-distributed
   libpng-dev libtinygltf-dev libcpp-httplib-dev libjs-three chromium chromium-driver python3-selenium python3-pil
-  blender)
+  blender xvfb xauth)
 
 missing=()
 for p in "${packages[@]}"; do

@@ -1,0 +1,400 @@
+"""Checks of the voxwarp add-on inside Blender, run by python/tests/test_blender_addon.py:
+
+    blender -b --factory-startup --python blender/tests/checks.py -- CHECK OUT.json [ARGS]
+
+Each check drives the add-on through its operators as a user would, measures, and writes its figures to OUT.json
+for the test to judge. The add-on is loaded from the source tree and the module from build/python (or
+VOXWARP_PYTHONPATH). `undo` needs a window: it runs under xvfb-run without -b, from a timer.
+"""
+
+import json
+import math
+import os
+import sys
+import time
+import traceback
+
+import bpy
+import numpy as np
+from mathutils import Euler, Vector
+from mathutils.bvhtree import BVHTree
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, os.path.dirname(HERE))
+sys.path.insert(0, os.environ.get("VOXWARP_PYTHONPATH", os.path.join(ROOT, "build", "python")))
+import voxwarp  # noqa: E402
+import voxwarp_blender  # noqa: E402
+from voxwarp_blender import core, ui  # noqa: E402
+
+DATA = os.environ.get("VOXWARP_DATA_DIR", os.path.join(ROOT, "data"))
+
+
+def data(name):
+    return os.path.join(DATA, name)
+
+
+def empty_scene():
+    for o in list(bpy.data.objects):
+        bpy.data.objects.remove(o)
+
+
+def mesh_object(name, V, F):
+    """A mesh object from voxwarp's arrays, active and selected, in object mode."""
+    me = bpy.data.meshes.new(name)
+    core.fill_mesh(me, V, F)
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    select(obj)
+    return obj
+
+
+def select(obj):
+    for o in bpy.context.selected_objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+
+
+def add(obj, kind, at):
+    """A handle through the add-on's operator, at the 3D cursor placed on `at` (world = the mesh's frame here)."""
+    select(obj)
+    bpy.context.scene.cursor.location = at
+    assert bpy.ops.voxwarp.add_handle(kind=kind, at="CURSOR") == {"FINISHED"}
+    return bpy.context.view_layer.objects.active
+
+
+def arrays(obj, modifiers=True):
+    """An object's (evaluated) mesh as (V, F) triangles, in its local frame."""
+    if modifiers:
+        return core.source_arrays(obj)[:2]
+    me = obj.data
+    me.calc_loop_triangles()
+    V = np.array([v.co[:] for v in me.vertices])
+    F = np.array([t.vertices[:] for t in me.loop_triangles], np.int32)
+    return V, F
+
+
+# ---- the analytic bend --------------------------------------------------------------------------------------------
+
+RADIUS = 4 / (math.pi / 2)  # the 4 x 1 x 1 box's axis bent 90 degrees into a quarter circle about (-2, R, z)
+
+
+def bend(P):
+    """The exact bend: the box's left end face stays, its axis becomes the quarter circle (data/box_bend.json)."""
+    phi = (P[:, 0] + 2) / RADIUS
+    r = RADIUS - P[:, 1]
+    return np.stack([-2 + r * np.sin(phi), RADIUS - r * np.cos(phi), P[:, 2]], axis=1)
+
+
+def box_grid(n=(160, 40, 40)):
+    """The 4 x 1 x 1 box's surface as a fine triangle grid (each face n cells a side)."""
+    lo, hi = np.array([-2, -0.5, -0.5]), np.array([2, 0.5, 0.5])
+    V, F = [], []
+    for axis in range(3):
+        u, v = [a for a in range(3) if a != axis]
+        for side in (0, 1):
+            a, b = np.meshgrid(np.linspace(lo[u], hi[u], n[u] + 1), np.linspace(lo[v], hi[v], n[v] + 1), indexing="ij")
+            P = np.zeros((a.size, 3))
+            P[:, u], P[:, v], P[:, axis] = a.ravel(), b.ravel(), (hi if side else lo)[axis]
+            i = np.arange(n[u])[:, None] * (n[v] + 1) + np.arange(n[v])[None, :]
+            i = i.ravel() + sum(len(x) for x in V)
+            F += [np.stack([i, i + n[v] + 1, i + n[v] + 2], 1), np.stack([i, i + n[v] + 2, i + 1], 1)]
+            V.append(P)
+    return np.concatenate(V), np.concatenate(F)
+
+
+def samples(V, F, count, rng):
+    """Points spread over a triangle mesh by area."""
+    t = V[F]
+    area = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    pick = rng.choice(len(F), count, p=area / area.sum())
+    a, b = rng.random(count), rng.random(count)
+    flip = a + b > 1
+    a[flip], b[flip] = 1 - a[flip], 1 - b[flip]
+    t = t[pick]
+    return t[:, 0] + a[:, None] * (t[:, 1] - t[:, 0]) + b[:, None] * (t[:, 2] - t[:, 0])
+
+
+def to_surface(points, V, F):
+    tree = BVHTree.FromPolygons([tuple(v) for v in V], [tuple(int(i) for i in f) for f in F])
+    return np.array([(Vector(p) - tree.find_nearest(Vector(p))[0]).length for p in points])
+
+
+def symmetric(V, F, exact, count=20000, seed=1):
+    """Distances between a mesh and the exact surface, both ways, over area samples: (mean, p99, max)."""
+    rng = np.random.default_rng(seed)
+    d = np.concatenate([to_surface(samples(V, F, count, rng), *exact), to_surface(samples(*exact, count, rng), V, F)])
+    return float(d.mean()), float(np.percentile(d, 99)), float(d.max())
+
+
+def check_bend(out, resolution=64):
+    """The box bent 90 degrees by two handles placed with the add-on's operators (a held region on the left end,
+    a handle on the right end moved and turned), against the arc; and Blender's Simple Deform on the same box."""
+    empty_scene()
+    V, F = voxwarp.read_mesh(data("box.obj"))
+    box = mesh_object("box", V, F)
+    box.voxwarp.solver = "RIGID"
+    box.voxwarp.resolution = resolution
+    region = add(box, "REGION", (-2, 0, 0))
+    region.empty_display_size = 0.8  # the left end face, corners and all
+    handle = add(box, "HANDLE", (2, 0, 0))
+    handle.location = bend(np.array([[2.0, 0, 0]]))[0]
+    handle.rotation_euler = Euler((0, 0, math.pi / 2))
+    select(box)
+    start = time.perf_counter()
+    assert bpy.ops.voxwarp.deform() == {"FINISHED"}
+    seconds = time.perf_counter() - start
+    result = bpy.context.view_layer.objects.active
+    report = core.last_report
+    h = report["voxel_size"]
+    exact = bend(box_grid()[0]), box_grid()[1]
+    figures = {"voxel_size": h, "seconds": seconds, "handles": len(core.handles(box)), "result": result.name}
+    mean, p99, worst = symmetric(*arrays(result), exact)
+    figures["voxwarp"] = {"mean": mean / h, "p99": p99 / h, "max": worst / h, "triangles": len(result.data.polygons),
+                          "volume_change_percent": report["volume_change_percent"]}
+    # Blender's Simple Deform, bend 90 degrees about Z with its origin on the left end: the same analytic map at
+    # each vertex, straight faces between (the coarse box), and with a Simple subdivision first (16 cuts an edge).
+    origin = bpy.data.objects.new("bend origin", None)
+    bpy.context.scene.collection.objects.link(origin)
+    origin.location = (-2, 0, 0)
+    for label, levels in (("simple_deform", 0), ("simple_deform_subdivided", 4)):
+        o = mesh_object(label, V, F)
+        if levels:
+            sub = o.modifiers.new("subdivide", "SUBSURF")
+            sub.subdivision_type, sub.levels = "SIMPLE", levels
+        m = o.modifiers.new("bend", "SIMPLE_DEFORM")
+        m.deform_method, m.deform_axis, m.angle, m.origin = "BEND", "Z", math.pi / 2, origin
+        bpy.context.view_layer.update()
+        W, G = arrays(o)
+        mean, p99, worst = symmetric(W, G, exact)
+        figures[label] = {"mean": mean / h, "p99": p99 / h, "max": worst / h, "triangles": len(G), "end": W[np.argmax(W[:, 1])].tolist()}
+    return figures
+
+
+def bunny_with_ear_handle(resolution=64):
+    """The bunny with the bundled ear edit's handle and pins (data/bunny_ear.json) placed by the operators."""
+    empty_scene()
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    bunny = mesh_object("bunny", V, F)
+    bunny.voxwarp.resolution = resolution
+    edit = json.load(open(data("bunny_ear.json")))["edits"][0]["constraints"]
+    for c in edit:
+        e = add(bunny, "HANDLE" if "move" in c else "PIN", c.get("move", c.get("pin")))
+        if "to" in c:
+            e.location = c["to"]
+    select(bunny)
+    return bunny
+
+
+def check_files(out):
+    """Edit files both ways: the bundled ear edit imported as handles and exported again; and a deform made here
+    beside the edit file and mesh exported from Blender, for the test to run through `voxwarp deform`."""
+    folder = os.path.dirname(out)
+    figures = {}
+    # Import, export: the same constraints, numbers and all.
+    empty_scene()
+    V, F = voxwarp.read_mesh(data("bunny.obj"))
+    bunny = mesh_object("bunny", V, F)
+    assert bpy.ops.voxwarp.import_edit(filepath=data("bunny_ear.json")) == {"FINISHED"}
+    figures["imported_handles"] = len(core.handles(bunny))
+    exported = os.path.join(folder, "roundtrip.json")
+    select(bunny)
+    assert bpy.ops.voxwarp.export_edit(filepath=exported, with_mesh=False) == {"FINISHED"}
+    figures["roundtrip"] = exported
+    # A handle moved and turned, a region held, a pin: exported with the mesh, and the deform made here.
+    bunny = bunny_with_ear_handle()
+    handle = next(e for e in core.handles(bunny) if e["voxwarp_kind"] == "handle")
+    handle.rotation_euler = Euler((0.3, 0, 0.2))
+    add(bunny, "REGION", (0.0, 1.0, 0.0))
+    select(bunny)
+    bunny.voxwarp.mesher = "FEATURES"
+    edit = os.path.join(folder, "from_blender.json")
+    assert bpy.ops.voxwarp.export_edit(filepath=edit, with_mesh=True) == {"FINISHED"}
+    V2, F2, report, _ = core.deform(bunny, bunny.voxwarp)
+    voxwarp.write_mesh(os.path.join(folder, "blender_out.obj"), V2, F2)
+    figures.update(edit=edit, mesh=os.path.join(folder, "from_blender.obj"), output=os.path.join(folder, "blender_out.obj"),
+                   options=core.options_of(bunny.voxwarp).split())
+    return figures
+
+
+def check_errors(out):
+    """Bad input reported by the operators, Blender carrying on: an empty mesh, a mesh without handles, a handle put
+    far outside the model, a malformed edit file; and an open scan (not manifold) deformed."""
+    figures = {}
+
+    def attempt(label, call):
+        try:
+            result = call()
+            figures[label] = {"result": sorted(result)}
+        except RuntimeError as e:  # an operator's ERROR report, as Python sees it
+            figures[label] = {"error": str(e)}
+
+    empty_scene()
+    empty = mesh_object("empty", np.zeros((0, 3)), np.zeros((0, 3), np.int32))
+    attempt("empty_mesh", lambda: bpy.ops.voxwarp.deform())
+    V, F = voxwarp.read_mesh(data("box.obj"))
+    box = mesh_object("box", V, F)
+    attempt("no_handles", lambda: bpy.ops.voxwarp.deform())
+    add(box, "HANDLE", (40, 0, 0))  # ten model lengths off to the side
+    add(box, "PIN", (-2, 0, 0))
+    select(box)
+    attempt("handle_outside", lambda: bpy.ops.voxwarp.deform())
+    bad = os.path.join(os.path.dirname(out), "bad_edit.json")
+    with open(bad, "w") as f:
+        f.write('{"edits": [{"constraints": [{"move": [0, 0], "to": [1, 2, 3]}]}]}')
+    attempt("malformed_edit", lambda: bpy.ops.voxwarp.import_edit(filepath=bad))
+    figures["handles_after_malformed"] = len(core.handles(box))
+    V, F = voxwarp.read_mesh(data("snowden_lo.obj"))
+    scan = mesh_object("scan", V, F)
+    scan.voxwarp.resolution = 64
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    add(scan, "PIN", (lo + hi) / 2 - [0, (hi - lo)[1] * 0.3, 0])
+    top = V[np.argmax(V[:, 1])]
+    e = add(scan, "HANDLE", top)
+    e.location = top + [0, (hi - lo)[1] * 0.05, 0]
+    select(scan)
+    attempt("open_scan", lambda: bpy.ops.voxwarp.deform())
+    figures["objects"] = sorted(o.name for o in bpy.data.objects if o.type == "MESH")
+    return figures
+
+
+def check_live(out, moves=12):
+    """Live mode on the bunny: each handle move (a depsgraph update) re-runs the deform at the preview resolution
+    into the live object, and once the handles rest the timer makes it at full resolution, as Apply would."""
+    bunny = bunny_with_ear_handle(resolution=96)
+    bunny.voxwarp.preview_resolution = 64
+    handle = next(e for e in core.handles(bunny) if e["voxwarp_kind"] == "handle")
+    bunny.voxwarp.live = True
+    live = bunny.voxwarp.preview
+    figures = {"live_object": live.name if live else None, "updates": []}
+    start_tip = Vector(handle.location)
+    seconds = []
+    for i in range(moves):
+        handle.location = start_tip + Vector((0, 0.05 * (i + 1), 0))
+        t = time.perf_counter()
+        bpy.context.view_layer.update()
+        seconds.append(time.perf_counter() - t)
+        V, _ = arrays(live, modifiers=False)
+        figures["updates"].append({"top": float(V[:, 1].max()), "vertices": len(V), "status": bunny.voxwarp.status})
+    figures["seconds"] = seconds
+    time.sleep(ui.SETTLE + 0.05)
+    ui.finish_live()
+    V, F = arrays(live, modifiers=False)
+    figures["full"] = {"vertices": len(V), "status": bunny.voxwarp.status}
+    V2, F2, _, _ = core.deform(bunny, bunny.voxwarp)
+    figures["full_matches_apply"] = bool(len(V) == len(V2) and np.abs(V - V2).max() < 1e-5)
+    bunny.voxwarp.live = False
+    figures["live_object_after_off"] = sum(1 for o in bpy.data.objects if o.name.endswith("voxwarp live"))
+    return figures
+
+
+def check_undo(out):
+    """(In a window, one step per timer tick, as a user's clicks come.) The bunny, imported by Blender's own OBJ
+    importer, its ear pulled by a handle placed with the operator and applied in place, then Undo: the original
+    mesh and the handle's rest; and Apply as a new object, then Undo: the object gone. Operators are called with
+    undo=True, as a click in the UI calls them (from a script Blender pushes no undo step otherwise)."""
+    window = bpy.context.window_manager.windows[0]
+    area = next(a for a in window.screen.areas if a.type == "VIEW_3D")
+    figures, state = {}, {}
+
+    def world(p):  # a point of the file in Blender's world (the importer turns Y-up files to Z-up)
+        obj = state["bunny"]
+        return obj.matrix_world @ Vector(state["to_local"](np.asarray(p, float)))
+
+    def steps():
+        bpy.ops.object.select_all(action="SELECT")
+        bpy.ops.object.delete("EXEC_DEFAULT", True)
+        bpy.ops.wm.obj_import("EXEC_DEFAULT", True, filepath=data("bunny.obj"))
+        yield
+        bunny = state["bunny"] = bpy.context.selected_objects[0]
+        bunny.name = "bunny"
+        V = arrays(bunny, modifiers=False)[0]
+        file_V, _ = voxwarp.read_mesh(data("bunny.obj"))
+        baked = file_V[:, [0, 2, 1]] * [1, -1, 1]
+        state["to_local"] = (lambda p: p) if np.allclose(V, file_V, atol=1e-5) else (lambda p: p[..., [0, 2, 1]] * [1, -1, 1])
+        assert np.allclose(V, state["to_local"](file_V), atol=1e-5) or np.allclose(V, baked, atol=1e-5)
+        bunny.voxwarp.resolution = 64
+        for c in json.load(open(data("bunny_ear.json")))["edits"][0]["constraints"]:
+            select(bunny)
+            bpy.context.scene.cursor.location = world(c.get("move", c.get("pin")))
+            bpy.ops.voxwarp.add_handle("EXEC_DEFAULT", True, kind="HANDLE" if "move" in c else "PIN", at="CURSOR")
+            if "to" in c:
+                bpy.context.view_layer.objects.active.location = state["to_local"](np.asarray(c["to"], float))
+                bpy.ops.ed.undo_push(message="handle moved")
+            yield
+        select(bunny)
+        state["before"] = arrays(bunny, modifiers=False)[0]
+        figures["rest_before"] = core.rest_of(next(e for e in core.handles(bunny) if e["voxwarp_kind"] == "handle"))[0]
+        assert bpy.ops.voxwarp.deform("EXEC_DEFAULT", True, in_place=True) == {"FINISHED"}
+        yield
+        after = arrays(bpy.data.objects["bunny"], modifiers=False)[0]
+        before = state["before"]
+        up = state["to_local"](np.array([0.0, 1.0, 0.0]))  # the file's up in the mesh's frame
+        figures["in_place"] = {"before": len(before), "after": len(after), "top_before": float((before @ up).max()), "top_after": float((after @ up).max())}
+        bpy.ops.ed.undo()
+        yield
+        bunny = bpy.data.objects["bunny"]
+        undone = arrays(bunny, modifiers=False)[0]
+        figures["undone"] = {"vertices": len(undone), "max_difference": float(np.abs(undone - before).max()) if len(undone) == len(before) else None,
+                             "rest_of_handle": core.rest_of(next(e for e in core.handles(bunny) if e["voxwarp_kind"] == "handle"))[0]}
+        select(bunny)
+        state["names"] = {o.name for o in bpy.data.objects}
+        assert bpy.ops.voxwarp.deform("EXEC_DEFAULT", True) == {"FINISHED"}
+        yield
+        figures["new_objects"] = sorted({o.name for o in bpy.data.objects} - state["names"])
+        bpy.ops.ed.undo()
+        yield
+        figures["after_undo"] = sorted({o.name for o in bpy.data.objects} - state["names"])
+
+    for _ in steps():
+        yield
+    state["figures"] = figures
+    yield figures
+
+
+CHECKS = {"bend": check_bend, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
+
+
+def main():
+    argv = sys.argv[sys.argv.index("--") + 1:]
+    check, out = argv[0], argv[1]
+    voxwarp_blender.register()
+    try:
+        figures = CHECKS[check](out)
+        code = 0
+    except Exception:  # noqa: BLE001
+        figures = {"exception": traceback.format_exc()}
+        code = 1
+    with open(out, "w") as f:
+        json.dump(figures, f, indent=2)
+    print(json.dumps(figures, indent=2)[:4000], flush=True)
+    return code
+
+
+if bpy.app.background:
+    sys.exit(main())
+else:  # in a window (undo): a check is a generator, one step per timer tick; its last yield is its figures
+    _steps = None
+
+    def _tick():
+        global _steps
+        argv = sys.argv[sys.argv.index("--") + 1:]
+        window = bpy.context.window_manager.windows[0]
+        area = next(a for a in window.screen.areas if a.type == "VIEW_3D")
+        try:
+            with bpy.context.temp_override(window=window, area=area):
+                if _steps is None:
+                    voxwarp_blender.register()
+                    _steps = CHECKS[argv[0]](argv[1])
+                figures = next(_steps)
+        except Exception:  # noqa: BLE001
+            figures = {"exception": traceback.format_exc()}
+        if figures is None:
+            return 0.2
+        with open(argv[1], "w") as f:
+            json.dump(figures, f, indent=2)
+        print(json.dumps(figures, indent=2)[:4000], flush=True)
+        os._exit(1 if "exception" in figures else 0)
+
+    bpy.app.timers.register(_tick, first_interval=0.5)

@@ -1,0 +1,452 @@
+"""The add-on's logic without its UI: a mesh object's handles (Empties) as an edit, the deform through voxwarp's
+Python module, and the result as a Blender mesh.
+
+Frame: the mesh object's own (local) coordinates, in its own units. They are the coordinates voxwarp sees, an
+exported edit file holds and an exported mesh is written in, so that `voxwarp deform` on the command line
+reproduces a deform made here byte for byte.
+
+A handle is an Empty parented to the mesh whose custom properties record what it is:
+  voxwarp_kind   "handle" (move a point, and turn it if the Empty is turned), "pin" (hold a point) or
+                 "region" (a sphere, radius = display size x scale: the surface inside follows the Empty's
+                 rigid motion, or is held still if the Empty has not moved)
+  voxwarp_rest   where the handle was put (location, 3 doubles) and its rotation then (quaternion w x y z)
+  voxwarp_to     the exact target read from an edit file, used while the Empty stays where it was put
+  voxwarp_weight optional weight (> 0) of its constraints
+The Empty's current location and rotation are its target.
+"""
+
+import ctypes
+import glob
+import json
+import math
+import os
+import re
+import sys
+import time
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Quaternion, Vector
+
+KIND, REST, TO, WEIGHT = "voxwarp_kind", "voxwarp_rest", "voxwarp_to", "voxwarp_weight"
+EXTRA = "voxwarp_extra"  # on the mesh object: JSON of what Empties cannot show (earlier edits, control points)
+KINDS = ("handle", "pin", "region")
+DISPLAY = {"handle": "ARROWS", "pin": "PLAIN_AXES", "region": "SPHERE"}
+REGION_POINTS = 16  # surface points a region's motion is imposed on
+
+# ---- finding the compiled module ----------------------------------------------------------------------------------
+
+_module = None
+
+
+def module_folders(preference=""):
+    """Folders that may hold the `voxwarp` package, in the order they are tried."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    folders = [os.path.join(here, "lib")]  # shipped by blender/install.sh
+    folders += [p for p in (preference, os.environ.get("VOXWARP_PYTHONPATH", "")) if p]
+    source = os.path.dirname(os.path.dirname(here))  # run from the source tree: its build
+    folders.append(os.path.join(source, "build", "python"))
+    return folders
+
+
+def module(preference=""):
+    """voxwarp's Python module: the copy the add-on ships (blender/install.sh), else one in the preference's folder,
+    VOXWARP_PYTHONPATH or the source tree's build, else one on sys.path. Raises RuntimeError saying how to install
+    it when there is none."""
+    global _module
+    if _module is None and "voxwarp" in sys.modules:
+        _module = sys.modules["voxwarp"]
+    if _module is not None:
+        return _module
+    for folder in module_folders(preference):
+        if not os.path.isfile(os.path.join(folder, "voxwarp", "__init__.py")):
+            continue
+        _preload(folder)
+        sys.path.insert(0, folder)
+        try:
+            import voxwarp
+        except ImportError as e:
+            sys.path.remove(folder)
+            raise RuntimeError(f"voxwarp's module in {folder} does not load in Blender's Python {sys.version.split()[0]}: {e}") from e
+        _module = voxwarp
+        return _module
+    try:
+        import voxwarp
+    except ImportError:
+        raise RuntimeError("voxwarp's Python module was not found (looked in " + ", ".join(module_folders(preference)) +
+                           "): run `bash blender/install.sh` in voxwarp's source folder, or set the folder holding it "
+                           "(build/python) in the add-on's preferences") from None
+    _module = voxwarp
+    return _module
+
+
+def _preload(folder):
+    """The shipped copy's own voxwarp libraries, loaded first, each after the ones it needs, so that the module
+    finds them by name (not through the build tree its RUNPATH names, which may be gone)."""
+    libraries = {os.path.basename(p): p for p in glob.glob(os.path.join(folder, "libvoxwarp_*.so"))}
+    needs = {}
+    for name, path in libraries.items():
+        with open(path, "rb") as f:  # the names in its dynamic string table: its own and those it needs
+            needs[name] = {n.decode() for n in re.findall(rb"libvoxwarp_\w+\.so", f.read())} - {name}
+    loaded = set()
+    while len(loaded) < len(libraries):
+        ready = sorted(n for n in libraries if n not in loaded and needs[n] <= loaded | (needs[n] - set(libraries)))
+        if not ready:
+            return  # a cycle cannot happen between shared libraries that link; leave the rest to the loader
+        for name in ready:
+            ctypes.CDLL(libraries[name], mode=ctypes.RTLD_GLOBAL)
+            loaded.add(name)
+
+
+# ---- the source mesh as arrays --------------------------------------------------------------------------------------
+
+def source_arrays(obj, depsgraph=None):
+    """The mesh object's evaluated mesh (modifiers applied) as voxwarp's arrays in its local frame: V float64 (n, 3),
+    F int32 (m, 3), and its attributes (UV map, colour, materials) as voxwarp.read_mesh gives them, or None."""
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    evaluated = obj.evaluated_get(depsgraph)
+    me = evaluated.to_mesh()
+    try:
+        me.calc_loop_triangles()
+        n, m = len(me.vertices), len(me.loop_triangles)
+        if n == 0 or m == 0:
+            raise ValueError(f"{obj.name}: the mesh has no faces to deform")
+        V = np.empty(3 * n, np.float32)
+        me.vertices.foreach_get("co", V)
+        F = np.empty(3 * m, np.int32)
+        me.loop_triangles.foreach_get("vertices", F)
+        loops = np.empty(3 * m, np.int32)
+        me.loop_triangles.foreach_get("loops", loops)
+        attributes = {}
+        if me.uv_layers.active is not None:
+            uv = np.empty(2 * len(me.loops), np.float32)
+            me.uv_layers.active.data.foreach_get("uv", uv)
+            corners = uv.reshape(-1, 2)[loops].astype(np.float64)
+            unique, index = np.unique(corners, axis=0, return_inverse=True)
+            attributes["uv"] = unique
+            attributes["uv_index"] = index.reshape(-1, 3).astype(np.int32)
+        colour = _active_colour(me)
+        if colour is not None:
+            attributes["colour"] = colour
+        if len(obj.material_slots) > 0:
+            material = np.empty(m, np.int32)
+            me.loop_triangles.foreach_get("material_index", material)
+            attributes["material"] = np.minimum(material, len(obj.material_slots) - 1)
+            attributes["materials"] = [{"name": s.material.name if s.material else f"slot{i}"} for i, s in enumerate(obj.material_slots)]
+        return V.reshape(-1, 3).astype(np.float64), F.reshape(-1, 3), (attributes or None)
+    finally:
+        evaluated.to_mesh_clear()
+
+
+def _active_colour(me):
+    """The active colour attribute as float32 (n, 3) per vertex in [0, 1] (sRGB, as files hold it), or None."""
+    layer = getattr(me.color_attributes, "active_color", None) if hasattr(me, "color_attributes") else None
+    if layer is None:
+        return None
+    field = "color_srgb" if hasattr(layer.data[0] if len(layer.data) else None, "color_srgb") else "color"
+    rgba = np.empty(4 * len(layer.data), np.float32)
+    layer.data.foreach_get(field, rgba)
+    rgba = rgba.reshape(-1, 4)[:, :3]
+    if layer.domain == "POINT":
+        return np.clip(rgba, 0, 1)
+    if layer.domain == "CORNER":
+        vertex = np.empty(len(me.loops), np.int32)
+        me.loops.foreach_get("vertex_index", vertex)
+        total = np.zeros((len(me.vertices), 3), np.float64)
+        count = np.zeros(len(me.vertices))
+        np.add.at(total, vertex, rgba)
+        np.add.at(count, vertex, 1)
+        return np.clip(total / np.maximum(count, 1)[:, None], 0, 1).astype(np.float32)
+    return None
+
+
+# ---- handles --------------------------------------------------------------------------------------------------------
+
+def is_handle(o):
+    return o is not None and o.type == "EMPTY" and o.get(KIND) in KINDS
+
+
+def handles(obj):
+    """The mesh object's handles, in a stable order (by name)."""
+    return sorted((c for c in obj.children if is_handle(c)), key=lambda o: o.name)
+
+
+def source_of(o):
+    """The mesh a selection refers to: the object itself, or a handle's mesh."""
+    if is_handle(o) and o.parent is not None and o.parent.type == "MESH":
+        return o.parent
+    return o if o is not None and o.type == "MESH" else None
+
+
+def handle_collection(obj):
+    """The "voxwarp" collection under the mesh's collection, holding its handles."""
+    parent = obj.users_collection[0] if obj.users_collection else bpy.context.scene.collection
+    for c in parent.children:
+        if c.name == "voxwarp" or c.name.startswith("voxwarp."):
+            return c
+    c = bpy.data.collections.new("voxwarp")
+    parent.children.link(c)
+    return c
+
+
+def add_handle(obj, kind, location, size, target=None, weight=None):
+    """A new handle of `kind` at `location` (local frame), resting there; `target` (local) moves it at once."""
+    if kind not in KINDS:
+        raise ValueError(f"handle kind: expected one of {', '.join(KINDS)}, got {kind!r}")
+    e = bpy.data.objects.new(f"{obj.name} {kind}", None)
+    e.empty_display_type = DISPLAY[kind]
+    e.empty_display_size = size
+    handle_collection(obj).objects.link(e)
+    e.parent = obj
+    e.matrix_parent_inverse = Matrix.Identity(4)
+    e[KIND] = kind
+    e[REST] = [float(x) for x in location] + [1.0, 0.0, 0.0, 0.0]
+    e.location = Vector(target if target is not None else location)
+    e[TO] = [float(x) for x in (target if target is not None else location)]
+    if weight is not None:
+        e[WEIGHT] = float(weight)
+    return e
+
+
+def rest_of(e):
+    """Where the handle rests: its location (3 doubles, exact as given) and rotation."""
+    r = [float(x) for x in e[REST]]
+    return r[:3], Quaternion(r[3:7])
+
+
+def set_rest(e):
+    """The handle's rest becomes where it is now (after the mesh itself was deformed in place)."""
+    location, rotation = local_frame(e)
+    e[REST] = [float(x) for x in location] + list(rotation)
+    e[TO] = [float(x) for x in location]
+
+
+def local_frame(e):
+    """The handle's location and rotation in its mesh's frame."""
+    if e.matrix_parent_inverse == Matrix.Identity(4):
+        m = e.matrix_basis
+        return e.location.copy(), m.to_quaternion()
+    m = e.parent.matrix_world.inverted_safe() @ e.matrix_world
+    return m.to_translation(), m.to_quaternion()
+
+
+def _exact(e, location):
+    """The handle's target: the exact doubles it was given while the Empty stays there, else its location."""
+    to = e.get(TO)
+    if to is not None and len(to) == 3 and Vector(list(to)) == location:
+        return [float(x) for x in to]
+    return [float(x) for x in location]
+
+
+def _scale(e):
+    m = e.matrix_basis if e.matrix_parent_inverse == Matrix.Identity(4) else e.parent.matrix_world.inverted_safe() @ e.matrix_world
+    return max(abs(s) for s in m.to_scale())
+
+
+def region_points(V, F, centre, radius, count=REGION_POINTS):
+    """Up to `count` points of the surface inside a sphere, spread out: vertices, edge midpoints and triangle
+    centroids inside it, thinned by farthest-point sampling (deterministic)."""
+    c = np.asarray(centre, np.float64)
+    t = V[F]
+    candidates = np.concatenate([V, (t[:, 0] + t[:, 1]) / 2, (t[:, 1] + t[:, 2]) / 2, (t[:, 2] + t[:, 0]) / 2, t.mean(axis=1)])
+    inside = candidates[((candidates - c) ** 2).sum(axis=1) <= radius * radius]
+    if len(inside) == 0:
+        return inside
+    inside = np.unique(inside, axis=0)
+    chosen = [int(np.argmin(((inside - c) ** 2).sum(axis=1)))]
+    distance = ((inside - inside[chosen[0]]) ** 2).sum(axis=1)
+    while len(chosen) < min(count, len(inside)):
+        k = int(np.argmax(distance))
+        if distance[k] <= 0:
+            break
+        chosen.append(k)
+        distance = np.minimum(distance, ((inside - inside[k]) ** 2).sum(axis=1))
+    return inside[chosen]
+
+
+def constraints_of(obj, V, F):
+    """The edit-file constraints the mesh's handles stand for (local frame)."""
+    out = []
+    for e in handles(obj):
+        kind = e[KIND]
+        exact_rest, rest_rotation = rest_of(e)
+        rest = Vector(exact_rest)
+        location, rotation = local_frame(e)
+        to = _exact(e, location)
+        turn = rotation @ rest_rotation.inverted()
+        turned = abs(turn.angle) > 1e-6 and abs(turn.angle - 2 * math.pi) > 1e-6
+        weight = {"weight": float(e[WEIGHT])} if WEIGHT in e else {}
+        here = []
+        if kind == "pin":
+            here.append({"pin": to})
+        elif kind == "handle":
+            here.append({"move": exact_rest, "to": to})
+            if turned:  # its orientation: three arm points carried by the Empty's turn (a frame constraint, #23)
+                arm = e.empty_display_size * _scale(e)
+                for axis in range(3):
+                    a = rest_rotation @ Vector([arm if i == axis else 0.0 for i in range(3)])
+                    here.append({"move": [float(x) for x in rest + a], "to": [float(x) for x in Vector(to) + turn @ a]})
+        else:
+            radius = e.empty_display_size * _scale(e)
+            points = region_points(V, F, exact_rest, radius)
+            if len(points) == 0:
+                raise ValueError(f"{e.name}: the region (radius {radius:.4g}) holds no part of {obj.name}'s surface")
+            moved = turned or Vector(to) != rest
+            for p in points:
+                if moved:
+                    q = Vector(to) + turn @ (Vector(p) - rest)
+                    here.append({"move": [float(x) for x in p], "to": [float(x) for x in q]})
+                else:
+                    here.append({"pin": [float(x) for x in p]})
+        out += [dict(c, **weight) for c in here]
+    return out
+
+
+def extra_of(obj):
+    """What an imported edit file held that Empties cannot show: {"earlier": [edits], "constraints": [...]}."""
+    try:
+        extra = json.loads(obj.get(EXTRA, "{}"))
+    except ValueError:
+        extra = {}
+    return {"earlier": extra.get("earlier", []), "constraints": extra.get("constraints", [])}
+
+
+def edit_of(obj, settings, V, F):
+    """The edit (a dict in the edit-file schema) the mesh's handles and settings stand for."""
+    extra = extra_of(obj)
+    constraints = constraints_of(obj, V, F) + extra["constraints"]
+    if not constraints:
+        raise ValueError(f"{obj.name}: no handles: add a handle (and a pin or a region to hold what should stay)")
+    return {
+        "lattice": {"size": list(settings.lattice_size), "placement": settings.lattice_placement.lower(), "padding": settings.lattice_padding},
+        "edits": extra["earlier"] + [{"solver": settings.solver.lower().replace("_", "-"), "preserve_volume": bool(settings.preserve_volume),
+                                      "constraints": constraints}],
+    }
+
+
+def edit_text(edit):
+    """An edit as the bundled edit files are laid out: one constraint a line, numbers exact (shortest round trip)."""
+    lines = ["{", f'  "lattice": {json.dumps(edit["lattice"])},', '  "edits": [']
+    for i, e in enumerate(edit["edits"]):
+        head = json.dumps({k: v for k, v in e.items() if k != "constraints"})[1:-1]
+        lines.append("    { " + (head + ", " if head else "") + '"constraints": [')
+        lines += ["        " + json.dumps(c) + ("," if j + 1 < len(e["constraints"]) else "") for j, c in enumerate(e["constraints"])]
+        lines.append("    ] }" + ("," if i + 1 < len(edit["edits"]) else ""))
+    return "\n".join(lines + ["  ]", "}"]) + "\n"
+
+
+def import_edit(obj, edit, settings, size):
+    """Handles for an edit file's last edit (moves become handles at their targets, pins pins); its lattice and
+    solver go into the settings; earlier edits and control-point offsets are kept on the mesh as they are."""
+    module().read_edit(edit)  # refused here with the file's own message if malformed
+    for e in handles(obj):
+        bpy.data.objects.remove(e)
+    lattice = edit.get("lattice", {})
+    size3 = lattice.get("size", 9)
+    settings.lattice_size = size3 if isinstance(size3, list) else [size3] * 3
+    settings.lattice_placement = lattice.get("placement", "uniform").upper()
+    settings.lattice_padding = lattice.get("padding", 0.25)
+    last = edit["edits"][-1]
+    settings.solver = last.get("solver", "min-norm").upper().replace("-", "_")
+    settings.preserve_volume = last.get("preserve_volume", False)
+    kept = []
+    for c in last["constraints"]:
+        if "move" in c:
+            add_handle(obj, "handle", c["move"], size, target=c["to"], weight=c.get("weight"))
+        elif "pin" in c:
+            add_handle(obj, "pin", c["pin"], size, weight=c.get("weight"))
+        else:
+            kept.append(c)
+    obj[EXTRA] = json.dumps({"earlier": edit["edits"][:-1], "constraints": kept})
+    return len(last["constraints"]) - len(kept), kept
+
+
+# ---- the deform ------------------------------------------------------------------------------------------------------
+
+def deform(obj, settings, resolution=None, depsgraph=None, preview=False):
+    """Deform the mesh object by its handles: (V, F, report, attributes or None), local frame."""
+    vw = module(settings.module_preference())
+    V, F, attributes = source_arrays(obj, depsgraph)
+    edit = edit_of(obj, settings, V, F)
+    size = {"voxel_size": settings.voxel_size} if settings.voxel_size > 0 and resolution is None else {"resolution": resolution or settings.resolution}
+    result = vw.deform(V, F, edit, **size, mesher="features" if settings.mesher == "FEATURES" else "mc", snap=settings.snap and not preview,
+                       attributes=attributes)
+    return result if attributes is not None else (*result, None)
+
+
+def options_of(settings, resolution=None):
+    """The command-line options that give the same deform as `deform` with these settings."""
+    size = f"--voxel-size {settings.voxel_size!r}" if settings.voxel_size > 0 and resolution is None else f"--resolution {resolution or settings.resolution}"
+    return size + (" --mesher features" if settings.mesher == "FEATURES" else "") + ("" if settings.snap else " --no-snap")
+
+
+def fill_mesh(me, V, F, attributes=None):
+    """Replace the Blender mesh's geometry by voxwarp's arrays (smooth shaded), with UV map, colour and material
+    indices from `attributes`."""
+    me.clear_geometry()
+    n, m = len(V), len(F)
+    me.vertices.add(n)
+    me.vertices.foreach_set("co", np.ascontiguousarray(V, np.float32).ravel())
+    me.loops.add(3 * m)
+    me.loops.foreach_set("vertex_index", np.ascontiguousarray(F, np.int32).ravel())
+    me.polygons.add(m)
+    me.polygons.foreach_set("loop_start", np.arange(0, 3 * m, 3, dtype=np.int32))
+    me.polygons.foreach_set("loop_total", np.full(m, 3, np.int32))
+    me.polygons.foreach_set("use_smooth", np.ones(m, bool))
+    if attributes:
+        if "uv_index" in attributes and len(attributes["uv"]):
+            index = np.asarray(attributes["uv_index"]).ravel()
+            uv = np.asarray(attributes["uv"], np.float32)[np.maximum(index, 0)]
+            uv[index < 0] = 0
+            layer = me.uv_layers.new(name="UVMap")
+            layer.data.foreach_set("uv", uv.ravel())
+        if "material" in attributes:
+            me.polygons.foreach_set("material_index", np.maximum(np.asarray(attributes["material"], np.int32), 0))
+        if "colour" in attributes:
+            rgba = np.ones((n, 4), np.float32)
+            rgba[:, :3] = attributes["colour"]
+            layer = me.color_attributes.new("Col", "FLOAT_COLOR", "POINT")
+            field = "color_srgb" if hasattr(layer.data[0], "color_srgb") else "color"
+            layer.data.foreach_set(field, rgba.ravel())
+    me.update(calc_edges=True)
+
+
+def result_object(obj, name):
+    """A new mesh object beside `obj`, with its transform and its materials in the same slots."""
+    me = bpy.data.meshes.new(name)
+    for slot in obj.material_slots:
+        me.materials.append(slot.material)
+    out = bpy.data.objects.new(name, me)
+    for c in obj.users_collection or [bpy.context.scene.collection]:
+        c.objects.link(out)
+    out.matrix_world = obj.matrix_world.copy()
+    return out
+
+
+def summary(report, seconds, triangles):
+    """One line for the panel and the report area."""
+    worst = max((c.get("residual_voxels", 0.0) for e in report.get("edits", []) for c in e.get("constraints", [])), default=0.0)
+    return f"{triangles:,} triangles, voxel {report.get('voxel_size', 0):.4g}, worst constraint miss {worst:.2f} voxel, {seconds:.2f} s"
+
+
+last_report = None  # the last Apply's deform report (the dict `voxwarp deform --report` writes)
+
+
+def apply(obj, settings, in_place=False):
+    """Voxwarp Deform: the deformed mesh as a new object (its materials, UVs and colours with it), or in place of
+    the mesh's own geometry with its handles' rest moved to where they are. Returns (object, summary line)."""
+    start = time.perf_counter()
+    global last_report
+    V, F, report, attributes = deform(obj, settings)
+    seconds = time.perf_counter() - start
+    last_report = report
+    if in_place:
+        fill_mesh(obj.data, V, F, attributes)
+        for e in handles(obj):
+            set_rest(e)
+        obj[EXTRA] = "{}"  # the earlier edits and control points are in the geometry now
+        out = obj
+    else:
+        out = result_object(obj, f"{obj.name} voxwarp")
+        fill_mesh(out.data, V, F, attributes)
+    return out, summary(report, seconds, len(F))

@@ -1,0 +1,129 @@
+# voxwarp's Blender add-on (blender/voxwarp_blender) driven through its operators in Debian's Blender, headless:
+# the 4 x 1 x 1 box bent 90 degrees by two handles against the analytic arc (and Blender's own Simple Deform on the
+# same box against the same arc), Live mode, Undo (in a window under xvfb-run), edit files both ways with the CLI
+# giving the same bytes, bad input reported without a crash, and the one-command install. Each check runs in its
+# own Blender (blender/tests/checks.py) and writes its figures; the judging is here. Blender and xvfb come with the
+# README's commands (scripts/setup.sh); without them these tests fail rather than skip.
+import json
+import os
+import shutil
+import subprocess
+
+import pytest
+
+import voxwarp
+from conftest import data, run_cli
+
+ROOT = os.path.join(os.path.dirname(__file__), "..", "..")
+CHECKS = os.path.join(ROOT, "blender", "tests", "checks.py")
+MODULE = os.path.dirname(os.path.dirname(os.path.abspath(voxwarp.__file__)))
+
+
+def tool(name):
+    path = shutil.which(name)
+    assert path, f"{name} is not installed: scripts/setup.sh installs it"
+    return path
+
+
+def check(name, tmp, window=False):
+    """Figures of one check in blender/tests/checks.py."""
+    out = tmp / f"{name}.json"
+    command = [tool("blender"), "--factory-startup", "--python-exit-code", "1", "--python", CHECKS, "--", name, str(out)]
+    if window:  # undo needs a window: a virtual X display, software OpenGL
+        command = [tool("xvfb-run"), "-a", "-s", "-screen 0 1280x800x24"] + command
+    else:
+        command.insert(1, "-b")
+    env = dict(os.environ, VOXWARP_PYTHONPATH=MODULE)
+    r = subprocess.run(command, capture_output=True, text=True, timeout=600, env=env)
+    assert out.exists(), r.stdout[-3000:] + r.stderr[-3000:]
+    figures = json.loads(out.read_text())
+    assert "exception" not in figures, figures["exception"]
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    return figures
+
+
+def test_box_bent_by_two_handles_lands_on_the_arc(tmp):
+    f = check("bend", tmp)
+    v, coarse, fine = f["voxwarp"], f["simple_deform"], f["simple_deform_subdivided"]
+    print(f"box bent 90 degrees at voxel {f['voxel_size']}: voxwarp ({f['handles']} handles, {v['triangles']} triangles) mean {v['mean']:.3f} "
+          f"p99 {v['p99']:.3f} max {v['max']:.3f} voxel, volume {v['volume_change_percent']:+.2f} %; Simple Deform ({coarse['triangles']} triangles) "
+          f"mean {coarse['mean']:.3f} p99 {coarse['p99']:.3f} max {coarse['max']:.3f}; Simple Deform subdivided ({fine['triangles']}) mean "
+          f"{fine['mean']:.4f} max {fine['max']:.4f}; {f['seconds']:.2f} s")
+    assert f["handles"] == 2
+    # The issue's bar is 1 voxel mean; measured 0.16 mean, 1.6 max, +1.0 % volume: about 2 x that.
+    assert v["mean"] <= 0.35 and v["max"] <= 3.2 and abs(v["volume_change_percent"]) <= 2.1, v
+    # Simple Deform puts each vertex on the same analytic map (so its subdivided box lies on the arc: this checks
+    # that the arc is placed where both tools bend to), and the coarse box's flat faces far off it.
+    assert fine["mean"] <= 0.05 and fine["max"] <= 0.5, fine
+    assert coarse["mean"] >= 10 * v["mean"], (coarse, v)
+
+
+def test_live_mode_follows_the_handle_then_finishes_at_full_resolution(tmp):
+    f = check("live", tmp)
+    updates = f["updates"]
+    assert f["live_object"] and len(updates) == 12
+    assert all(u["status"].startswith("preview: ") and u["vertices"] > 1000 for u in updates), updates
+    # The handle rose 0.6 over the moves: so did the ear's tip, each preview after the last (within a voxel, 0.15).
+    assert updates[-1]["top"] - updates[0]["top"] > 0.3 and all(b["top"] > a["top"] - 0.15 for a, b in zip(updates, updates[1:])), updates
+    assert not f["full"]["status"].startswith("preview") and f["full"]["vertices"] > 2 * updates[-1]["vertices"], f["full"]
+    assert f["full_matches_apply"]
+    assert f["live_object_after_off"] == 0
+
+
+def test_undo_returns_the_original_after_the_ear_is_pulled(tmp):
+    f = check("undo", tmp, window=True)
+    pulled = f["in_place"]
+    assert pulled["after"] != pulled["before"] and pulled["top_after"] > pulled["top_before"] + 1.0, pulled  # the ear went up 1.55
+    assert f["undone"]["vertices"] == pulled["before"] and f["undone"]["max_difference"] == 0.0, f["undone"]
+    assert f["undone"]["rest_of_handle"] == f["rest_before"]
+    assert f["new_objects"] == ["bunny voxwarp"] and f["after_undo"] == []
+
+
+def test_an_edit_file_from_blender_gives_the_same_bytes_through_the_cli(tmp):
+    f = check("files", tmp)
+    # The bundled edit, imported as handles and exported: the same constraints, to the last digit.
+    original = json.load(open(data("bunny_ear.json")))
+    exported = json.load(open(f["roundtrip"]))
+    assert f["imported_handles"] == 4
+    assert exported["edits"][0]["constraints"] == original["edits"][0]["constraints"]
+    assert exported["lattice"] == original["lattice"]
+    # Handles moved, turned, a region: the CLI, given the exported edit file and mesh, writes Blender's bytes.
+    edit = json.load(open(f["edit"]))["edits"][0]["constraints"]
+    assert len(edit) >= 4 + 3 + 2, edit  # a turned handle's arm points, a region's points
+    out = tmp / "cli.obj"
+    r = run_cli("deform", f["mesh"], f["edit"], "-o", out, "-q", *f["options"])
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == open(f["output"], "rb").read()
+
+
+def test_bad_input_is_reported_and_blender_carries_on(tmp):
+    f = check("errors", tmp)
+    assert "empty: the mesh has no faces" in f["empty_mesh"]["error"]
+    assert "box: no handles" in f["no_handles"]["error"]
+    assert "lies far outside the model" in f["handle_outside"]["error"], f["handle_outside"]
+    assert "bad_edit.json: edits[0].constraints[0].move: expected an array of three" in f["malformed_edit"]["error"]
+    assert f["handles_after_malformed"] == 2  # a bad file changes nothing
+    assert f["open_scan"] == {"result": ["FINISHED"]}
+    assert "scan voxwarp" in f["objects"] and "box voxwarp" not in f["objects"]
+
+
+def test_one_command_installs_and_enables_the_addon(tmp):
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VOXWARP_PYTHONPATH")}
+    env.update(BLENDER_USER_SCRIPTS=str(tmp / "scripts"), BLENDER_USER_CONFIG=str(tmp / "config"))
+    r = subprocess.run(["bash", os.path.join(ROOT, "blender", "install.sh")], capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "add-on installed" in r.stdout
+    # A new Blender with those preferences has it enabled, and its module loads voxwarp's libraries it ships.
+    probe = ("import addon_utils, json, sys; from voxwarp_blender import core; m = core.module(); "
+             "maps = open('/proc/self/maps').read(); "
+             "json.dump({'enabled': addon_utils.check('voxwarp_blender'), 'module': m.__file__, "
+             "'libraries': sorted({l.split()[-1] for l in maps.splitlines() if 'libvoxwarp_' in l})}, open(sys.argv[-1], 'w'))")
+    out = tmp / "probe.json"
+    r = subprocess.run([tool("blender"), "-b", "--python-exit-code", "1", "--python-expr", probe, "--", str(out)], capture_output=True, text=True,
+                       timeout=300, env=env)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    facts = json.loads(out.read_text())
+    addon = str(tmp / "scripts" / "addons" / "voxwarp_blender")
+    assert facts["enabled"] == [True, True], facts
+    assert facts["module"].startswith(addon), facts
+    assert facts["libraries"] and all(path.startswith(addon) for path in facts["libraries"]), facts
