@@ -218,6 +218,54 @@ def check_files(out):
     return figures
 
 
+def check_attributes(out):
+    """Spot, imported by Blender's own OBJ importer (UV map, material, texture), given a colour that is a linear
+    function of position, with the bundled head-turn edit imported as handles and then reset (nothing moves):
+    Apply's new object carries the material, the UV map and the colour, each as the source has it there."""
+    empty_scene()
+    bpy.ops.wm.obj_import(filepath=data("spot_triangulated.obj"))
+    spot = bpy.context.selected_objects[0]
+    select(spot)
+    spot.voxwarp.resolution = 64
+    V, F = arrays(spot, modifiers=False)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    layer = spot.data.color_attributes.new("Col", "FLOAT_COLOR", "POINT")
+    rgba = np.ones((len(V), 4), np.float32)
+    rgba[:, :3] = (V - lo) / (hi - lo)
+    field = "color_srgb" if hasattr(layer.data[0], "color_srgb") else "color"
+    layer.data.foreach_set(field, rgba.ravel())
+    spot.data.color_attributes.active_color = layer
+    assert bpy.ops.voxwarp.import_edit(filepath=data("spot_head.json")) == {"FINISHED"}
+    select(spot)
+    assert bpy.ops.voxwarp.reset_handles() == {"FINISHED"}
+    assert bpy.ops.voxwarp.deform() == {"FINISHED"}
+    result = bpy.context.view_layer.objects.active
+    me = result.data
+    figures = {"source_materials": [s.material.name for s in spot.material_slots], "materials": [s.material.name if s.material else None for s in result.material_slots],
+               "uv_layers": len(me.uv_layers), "colour_layers": len(me.color_attributes), "triangles": len(me.polygons)}
+    # Each output corner's texture coordinate against the source's, interpolated at the nearest source point.
+    source = spot.data
+    source.calc_loop_triangles()
+    tree = BVHTree.FromPolygons([v.co[:] for v in source.vertices], [t.vertices[:] for t in source.loop_triangles])
+    source_uv = source.uv_layers.active.data
+    from mathutils.interpolate import poly_3d_calc
+    texels, colour = [], []
+    out_colour = me.color_attributes["Col"].data
+    for poly in list(me.polygons)[::7]:
+        for loop in poly.loop_indices:
+            v = me.loops[loop].vertex_index
+            p = me.vertices[v].co
+            q, _, t, _ = tree.find_nearest(p)
+            tri = source.loop_triangles[t]
+            w = poly_3d_calc([source.vertices[i].co for i in tri.vertices], q)
+            uv = sum((Vector(source_uv[l].uv) * wi for l, wi in zip(tri.loops, w)), Vector((0, 0)))
+            texels.append((Vector(me.uv_layers[0].data[loop].uv) - uv).length * 1024)
+            colour.append(np.abs(np.array(getattr(out_colour[v], field)[:3]) - (np.array(p) - lo) / (hi - lo)).max())
+    figures["uv_texels"] = {"median": float(np.median(texels)), "p90": float(np.percentile(texels, 90)), "corners": len(texels)}
+    figures["colour"] = {"median": float(np.median(colour)), "p99": float(np.percentile(colour, 99))}
+    return figures
+
+
 def check_errors(out):
     """Bad input reported by the operators, Blender carrying on: an empty mesh, a mesh without handles, a handle put
     far outside the model, a malformed edit file; and an open scan (not manifold) deformed."""
@@ -353,7 +401,7 @@ def check_undo(out):
     yield figures
 
 
-CHECKS = {"bend": check_bend, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
+CHECKS = {"attributes": check_attributes, "bend": check_bend, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
 
 
 def main():
@@ -372,9 +420,9 @@ def main():
     return code
 
 
-if bpy.app.background:
+if __name__ == "__main__" and bpy.app.background:
     sys.exit(main())
-else:  # in a window (undo): a check is a generator, one step per timer tick; its last yield is its figures
+elif __name__ == "__main__":  # in a window (undo): a check is a generator, one step per timer tick; its last yield is its figures
     _steps = None
 
     def _tick():

@@ -8,7 +8,8 @@ reproduces a deform made here byte for byte.
 A handle is an Empty parented to the mesh whose custom properties record what it is:
   voxwarp_kind   "handle" (move a point, and turn it if the Empty is turned), "pin" (hold a point) or
                  "region" (a sphere, radius = display size x scale: the surface inside follows the Empty's
-                 rigid motion, or is held still if the Empty has not moved)
+                 rigid motion, or is held still if the Empty has not moved). Any of them shown as a sphere
+                 (Empty display "Sphere") is a region.
   voxwarp_rest   where the handle was put (location, 3 doubles) and its rotation then (quaternion w x y z)
   voxwarp_to     the exact target read from an edit file, used while the Empty stays where it was put
   voxwarp_weight optional weight (> 0) of its constraints
@@ -100,12 +101,15 @@ def _preload(folder):
 
 # ---- the source mesh as arrays --------------------------------------------------------------------------------------
 
-def source_arrays(obj, depsgraph=None):
-    """The mesh object's evaluated mesh (modifiers applied) as voxwarp's arrays in its local frame: V float64 (n, 3),
-    F int32 (m, 3), and its attributes (UV map, colour, materials) as voxwarp.read_mesh gives them, or None."""
-    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    evaluated = obj.evaluated_get(depsgraph)
-    me = evaluated.to_mesh()
+def source_arrays(obj, depsgraph=None, modifiers=True):
+    """The mesh object's evaluated mesh (modifiers applied; modifiers=False: its own mesh) as voxwarp's arrays in its
+    local frame: V float64 (n, 3), F int32 (m, 3), and its attributes (UV map, colour, materials) as
+    voxwarp.read_mesh gives them, or None."""
+    if modifiers:
+        evaluated = obj.evaluated_get(depsgraph or bpy.context.evaluated_depsgraph_get())
+        me = evaluated.to_mesh()
+    else:
+        evaluated, me = None, obj.data
     try:
         me.calc_loop_triangles()
         n, m = len(me.vertices), len(me.loop_triangles)
@@ -135,7 +139,8 @@ def source_arrays(obj, depsgraph=None):
             attributes["materials"] = [{"name": s.material.name if s.material else f"slot{i}"} for i, s in enumerate(obj.material_slots)]
         return V.reshape(-1, 3).astype(np.float64), F.reshape(-1, 3), (attributes or None)
     finally:
-        evaluated.to_mesh_clear()
+        if evaluated is not None:
+            evaluated.to_mesh_clear()
 
 
 def _active_colour(me):
@@ -164,6 +169,11 @@ def _active_colour(me):
 
 def is_handle(o):
     return o is not None and o.type == "EMPTY" and o.get(KIND) in KINDS
+
+
+def kind_of(e):
+    """What a handle does: an Empty shown as a sphere is a region, whatever it was added as."""
+    return "region" if e.empty_display_type == "SPHERE" else e[KIND]
 
 
 def handles(obj):
@@ -268,7 +278,7 @@ def constraints_of(obj, V, F):
     """The edit-file constraints the mesh's handles stand for (local frame)."""
     out = []
     for e in handles(obj):
-        kind = e[KIND]
+        kind = kind_of(e)
         exact_rest, rest_rotation = rest_of(e)
         rest = Vector(exact_rest)
         location, rotation = local_frame(e)
@@ -363,10 +373,11 @@ def import_edit(obj, edit, settings, size):
 
 # ---- the deform ------------------------------------------------------------------------------------------------------
 
-def deform(obj, settings, resolution=None, depsgraph=None, preview=False):
-    """Deform the mesh object by its handles: (V, F, report, attributes or None), local frame."""
+def deform(obj, settings, resolution=None, depsgraph=None, preview=False, modifiers=True):
+    """Deform the mesh object by its handles: (V, F, report, attributes or None), local frame. `modifiers`: the mesh
+    as its modifiers leave it (what the viewport shows), else its own mesh."""
     vw = module(settings.module_preference())
-    V, F, attributes = source_arrays(obj, depsgraph)
+    V, F, attributes = source_arrays(obj, depsgraph, modifiers)
     edit = edit_of(obj, settings, V, F)
     size = {"voxel_size": settings.voxel_size} if settings.voxel_size > 0 and resolution is None else {"resolution": resolution or settings.resolution}
     result = vw.deform(V, F, edit, **size, mesher="features" if settings.mesher == "FEATURES" else "mc", snap=settings.snap and not preview,
@@ -381,8 +392,8 @@ def options_of(settings, resolution=None):
 
 
 def fill_mesh(me, V, F, attributes=None):
-    """Replace the Blender mesh's geometry by voxwarp's arrays (smooth shaded), with UV map, colour and material
-    indices from `attributes`."""
+    """Replace the Blender mesh's geometry by voxwarp's arrays (smooth shaded but for edges over 30 degrees), with
+    UV map, colour and material indices from `attributes`."""
     me.clear_geometry()
     n, m = len(V), len(F)
     me.vertices.add(n)
@@ -393,6 +404,8 @@ def fill_mesh(me, V, F, attributes=None):
     me.polygons.foreach_set("loop_start", np.arange(0, 3 * m, 3, dtype=np.int32))
     me.polygons.foreach_set("loop_total", np.full(m, 3, np.int32))
     me.polygons.foreach_set("use_smooth", np.ones(m, bool))
+    if hasattr(me, "use_auto_smooth"):  # edges sharper than 30 degrees (the feature mesher's) shaded sharp
+        me.use_auto_smooth, me.auto_smooth_angle = True, math.radians(30)
     if attributes:
         if "uv_index" in attributes and len(attributes["uv"]):
             index = np.asarray(attributes["uv_index"]).ravel()
@@ -434,10 +447,11 @@ last_report = None  # the last Apply's deform report (the dict `voxwarp deform -
 
 def apply(obj, settings, in_place=False):
     """Voxwarp Deform: the deformed mesh as a new object (its materials, UVs and colours with it), or in place of
-    the mesh's own geometry with its handles' rest moved to where they are. Returns (object, summary line)."""
+    the mesh's own geometry (before its modifiers, which then act on the deformed mesh) with its handles' rest moved
+    to where they are. Returns (object, summary line)."""
     start = time.perf_counter()
     global last_report
-    V, F, report, attributes = deform(obj, settings)
+    V, F, report, attributes = deform(obj, settings, modifiers=not in_place)
     seconds = time.perf_counter() - start
     last_report = report
     if in_place:
