@@ -266,6 +266,34 @@ def check_attributes(out):
     return figures
 
 
+def check_handles(out):
+    """Handles as the operators place them: at the selected vertices in Edit Mode, at the 3D cursor of a moved and
+    scaled mesh (its own frame), and a handle shown as a sphere working as a region."""
+    empty_scene()
+    V, F = voxwarp.read_mesh(data("box.obj"))
+    box = mesh_object("box", V, F)
+    box.location, box.scale = (10, 0, 0), (2, 2, 2)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="DESELECT")
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for i in (1, 2):  # vertices (2, -0.5, -0.5) and (2, 0.5, -0.5)
+        box.data.vertices[i].select = True
+    bpy.ops.object.mode_set(mode="EDIT")
+    assert bpy.ops.voxwarp.add_handle(kind="HANDLE") == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    at_vertices = core.handles(box)[0]
+    select(box)
+    bpy.context.scene.cursor.location = (6, 0, 0)  # world: the box's local (-2, 0, 0)
+    assert bpy.ops.voxwarp.add_handle(kind="PIN") == {"FINISHED"}
+    pin = next(e for e in core.handles(box) if e["voxwarp_kind"] == "pin")
+    at_vertices.empty_display_type = "SPHERE"
+    at_vertices.empty_display_size = 0.1
+    V, F = arrays(box, modifiers=False)
+    constraints = core.constraints_of(box, V, F)
+    return {"at_vertices": core.rest_of(at_vertices)[0], "pin": core.rest_of(pin)[0], "kinds": [core.kind_of(e) for e in core.handles(box)],
+            "constraints": constraints, "parent": at_vertices.parent.name, "collection": [c.name for c in at_vertices.users_collection]}
+
+
 def check_errors(out):
     """Bad input reported by the operators, Blender carrying on: an empty mesh, a mesh without handles, a handle put
     far outside the model, a malformed edit file; and an open scan (not manifold) deformed."""
@@ -401,7 +429,7 @@ def check_undo(out):
     yield figures
 
 
-CHECKS = {"attributes": check_attributes, "bend": check_bend, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
+CHECKS = {"attributes": check_attributes, "bend": check_bend, "handles": check_handles, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
 
 
 def main():

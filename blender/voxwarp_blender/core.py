@@ -373,7 +373,7 @@ def import_edit(obj, edit, settings, size):
 
 # ---- the deform ------------------------------------------------------------------------------------------------------
 
-def deform(obj, settings, resolution=None, depsgraph=None, preview=False, modifiers=True):
+def deform(obj, settings, resolution=None, depsgraph=None, preview=False, modifiers=True, progress=None):
     """Deform the mesh object by its handles: (V, F, report, attributes or None), local frame. `modifiers`: the mesh
     as its modifiers leave it (what the viewport shows), else its own mesh."""
     vw = module(settings.module_preference())
@@ -381,7 +381,7 @@ def deform(obj, settings, resolution=None, depsgraph=None, preview=False, modifi
     edit = edit_of(obj, settings, V, F)
     size = {"voxel_size": settings.voxel_size} if settings.voxel_size > 0 and resolution is None else {"resolution": resolution or settings.resolution}
     result = vw.deform(V, F, edit, **size, mesher="features" if settings.mesher == "FEATURES" else "mc", snap=settings.snap and not preview,
-                       attributes=attributes)
+                       attributes=attributes, progress=progress)
     return result if attributes is not None else (*result, None)
 
 
@@ -445,13 +445,13 @@ def summary(report, seconds, triangles):
 last_report = None  # the last Apply's deform report (the dict `voxwarp deform --report` writes)
 
 
-def apply(obj, settings, in_place=False):
+def apply(obj, settings, in_place=False, progress=None):
     """Voxwarp Deform: the deformed mesh as a new object (its materials, UVs and colours with it), or in place of
     the mesh's own geometry (before its modifiers, which then act on the deformed mesh) with its handles' rest moved
     to where they are. Returns (object, summary line)."""
     start = time.perf_counter()
     global last_report
-    V, F, report, attributes = deform(obj, settings, modifiers=not in_place)
+    V, F, report, attributes = deform(obj, settings, modifiers=not in_place, progress=progress)
     seconds = time.perf_counter() - start
     last_report = report
     if in_place:

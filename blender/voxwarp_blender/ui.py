@@ -125,8 +125,13 @@ class VOXWARP_OT_deform(_OnMesh, bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         wm = context.window_manager
         wm.progress_begin(0, 1)
+
+        def progress(stage, fraction):  # the cursor's progress figure, as voxwarp's stages go
+            wm.progress_update(fraction)
+            return True
+
         try:
-            out, line = core.apply(obj, obj.voxwarp, in_place=self.in_place)
+            out, line = core.apply(obj, obj.voxwarp, in_place=self.in_place, progress=progress)
         except Exception as e:  # noqa: BLE001 (voxwarp's errors, bad input: reported, never raised into Blender)
             obj.voxwarp.status = _message(e)
             self.report({"ERROR"}, _message(e))

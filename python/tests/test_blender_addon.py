@@ -137,3 +137,13 @@ def test_apply_keeps_the_material_uv_map_and_colour(tmp):
     # Measured: UV median 6e-5 texel, p90 1.3e-4; colour (a linear function of position) median 7e-5, p99 0.0023.
     assert f["uv_texels"]["median"] <= 0.01 and f["uv_texels"]["p90"] <= 0.1, f["uv_texels"]
     assert f["colour"]["median"] <= 0.001 and f["colour"]["p99"] <= 0.005, f["colour"]
+
+
+def test_handles_go_where_the_operators_put_them(tmp):
+    f = check("handles", tmp)
+    assert f["at_vertices"] == [2.0, 0.0, -0.5]  # the mean of the two selected vertices, in the mesh's own frame
+    assert f["pin"] == [-2.0, 0.0, 0.0]  # the 3D cursor at world (6, 0, 0) on the box moved by 10 and scaled by 2
+    assert f["parent"] == "box" and f["collection"] == ["voxwarp"]
+    # The handle shown as a sphere (radius 0.1) is a region: held, it pins the surface inside it (one edge midpoint).
+    assert f["kinds"] == ["region", "pin"]
+    assert f["constraints"] == [{"pin": [2.0, 0.0, -0.5]}, {"pin": [-2.0, 0.0, 0.0]}]
