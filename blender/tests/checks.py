@@ -294,6 +294,45 @@ def check_handles(out):
             "constraints": constraints, "parent": at_vertices.parent.name, "collection": [c.name for c in at_vertices.users_collection]}
 
 
+class Layout:
+    """Stands in for the sidebar's UILayout while the panel's draw() runs (a panel draws only in its open tab of
+    a window): records each label, and checks that each property and operator it names exists."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def _child(self, *args, **kwargs):
+        return Layout(self.log)
+
+    row = column = box = _child
+
+    def label(self, text="", icon="NONE"):
+        self.log.append(("label", text))
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"panel: {type(data).__name__} has no property {name}"
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kwargs):
+        category, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, category), name) and getattr(getattr(bpy.ops, category), name).poll() in (True, False), idname
+        self.log.append(("operator", idname))
+        return type("Properties", (), {})()
+
+
+def check_panel(out):
+    """The sidebar panel's contents with a bunny and its handles active, and with nothing."""
+    bunny = bunny_with_ear_handle()
+    bunny.voxwarp.status = "a status line"
+    figures = {}
+    for label, active in (("bunny", bunny), ("handle", core.handles(bunny)[0]), ("nothing", None)):
+        bpy.context.view_layer.objects.active = active
+        log = []
+        ui.VOXWARP_PT_panel.draw(type("Panel", (), {"layout": Layout(log)})(), bpy.context)
+        figures[label] = log
+    return figures
+
+
 def check_errors(out):
     """Bad input reported by the operators, Blender carrying on: an empty mesh, a mesh without handles, a handle put
     far outside the model, a malformed edit file; and an open scan (not manifold) deformed."""
@@ -429,7 +468,7 @@ def check_undo(out):
     yield figures
 
 
-CHECKS = {"attributes": check_attributes, "bend": check_bend, "handles": check_handles, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
+CHECKS = {"attributes": check_attributes, "bend": check_bend, "handles": check_handles, "panel": check_panel, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
 
 
 def main():

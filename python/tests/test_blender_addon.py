@@ -147,3 +147,14 @@ def test_handles_go_where_the_operators_put_them(tmp):
     # The handle shown as a sphere (radius 0.1) is a region: held, it pins the surface inside it (one edge midpoint).
     assert f["kinds"] == ["region", "pin"]
     assert f["constraints"] == [{"pin": [2.0, 0.0, -0.5]}, {"pin": [-2.0, 0.0, 0.0]}]
+
+
+def test_the_sidebar_panel_offers_the_settings_and_operators(tmp):
+    f = check("panel", tmp)
+    for active in ("bunny", "handle"):  # a handle active shows its mesh's panel
+        names = [name for _, name in f[active]]
+        assert names[0] == "bunny: 4 handles" and names[-1] == "a status line", names
+        for name in ("resolution", "voxel_size", "solver", "preserve_volume", "mesher", "live", "preview_resolution", "voxwarp.add_handle",
+                     "voxwarp.deform", "voxwarp.import_edit", "voxwarp.export_edit"):
+            assert name in names, (name, names)
+    assert f["nothing"] == [["label", "Select a mesh (or one of its handles)"]]
