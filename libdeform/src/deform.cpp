@@ -10,8 +10,12 @@
 
 #include "thin_parts.h"
 
+#include <Eigen/Geometry>
+
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <tuple>
@@ -23,18 +27,102 @@ namespace deform_internal {
 using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-std::string kind_name(ConstraintKind k) { return k == ConstraintKind::move ? "move" : k == ConstraintKind::pin ? "pin" : "control_point"; }
+std::string kind_name(ConstraintKind k) {
+    switch (k) {
+    case ConstraintKind::move: return "move";
+    case ConstraintKind::pin: return "pin";
+    case ConstraintKind::control_point: return "control_point";
+    case ConstraintKind::turn: return "turn";
+    case ConstraintKind::join: return "connect";
+    case ConstraintKind::region: return "region";
+    }
+    return "?";
+}
+
+constexpr int kRegionPoints = 32; // material points a region's rigid motion is imposed on
+
+/// The rows the solve takes for an edit's constraints: each region becomes moves of up to kRegionPoints points of
+/// the material inside it (`material(shape)` lists candidates), spread by farthest-point sampling from the one
+/// nearest its middle, each carried by the region's rigid motion (or held, if it has none). owner[r]: the
+/// constraint row r comes from.
+std::vector<Constraint> expand_regions(const std::vector<Constraint>& constraints, const std::function<std::vector<Eigen::Vector3d>(const RegionShape&)>& material,
+                                       std::vector<int>& owner) {
+    std::vector<Constraint> rows;
+    owner.clear();
+    for (std::size_t c = 0; c < constraints.size(); ++c) {
+        const Constraint& k = constraints[c];
+        if (k.kind != ConstraintKind::region) {
+            rows.push_back(k), owner.push_back(int(c));
+            continue;
+        }
+        const std::vector<Eigen::Vector3d> inside = material(k.region);
+        if (inside.empty()) throw InvalidInput(k.name + ".region: holds none of the model's material");
+        const Eigen::Vector3d middle = k.region.sphere ? k.region.centre : Eigen::Vector3d((k.region.lo + k.region.hi) / 2);
+        std::vector<double> distance(inside.size());
+        std::size_t next = 0;
+        for (std::size_t i = 0; i < inside.size(); ++i)
+            if ((inside[i] - middle).squaredNorm() < (inside[next] - middle).squaredNorm()) next = i;
+        std::fill(distance.begin(), distance.end(), std::numeric_limits<double>::infinity());
+        for (int n = 0; n < kRegionPoints && distance[next] > 0; ++n) {
+            Constraint m = k;
+            m.kind = ConstraintKind::move;
+            m.entry = "region";
+            m.point = inside[next];
+            m.to = k.rotation * (m.point - k.pivot) + k.pivot + k.offset;
+            rows.push_back(m), owner.push_back(int(c));
+            for (std::size_t i = 0; i < inside.size(); ++i) distance[i] = std::min(distance[i], (inside[i] - inside[next]).squaredNorm());
+            next = std::size_t(std::max_element(distance.begin(), distance.end()) - distance.begin());
+        }
+    }
+    return rows;
+}
+
+/// Candidates for a region's points in a voxmap: the centres of the voxels inside it at or over density 0.5.
+std::function<std::vector<Eigen::Vector3d>(const RegionShape&)> material_of(const SparseVoxmap& voxmap) {
+    return [&voxmap](const RegionShape& shape) {
+        const Eigen::Vector3d lo = shape.sphere ? Eigen::Vector3d(shape.centre.array() - shape.radius) : shape.lo;
+        const Eigen::Vector3d hi = shape.sphere ? Eigen::Vector3d(shape.centre.array() + shape.radius) : shape.hi;
+        const Eigen::Vector3d a = voxmap.index_of(lo), b = voxmap.index_of(hi);
+        std::array<std::int64_t, 3> from{}, to{};
+        for (int d = 0; d < 3; ++d) {
+            from[std::size_t(d)] = std::max<std::int64_t>(0, std::int64_t(std::ceil(a[d])));
+            to[std::size_t(d)] = std::min<std::int64_t>(voxmap.dims()[std::size_t(d)] - 1, std::int64_t(std::floor(b[d])));
+        }
+        std::vector<Eigen::Vector3d> out;
+        for (std::int64_t k = from[2]; k <= to[2]; ++k)
+            for (std::int64_t j = from[1]; j <= to[1]; ++j)
+                for (std::int64_t i = from[0]; i <= to[0]; ++i) {
+                    const Eigen::Vector3d p = voxmap.world(double(i), double(j), double(k));
+                    if (voxmap.at(i, j, k) >= 0.5f && shape.contains(p)) out.push_back(p);
+                }
+        return out;
+    };
+}
+
+/// Candidates for a region's points on a mesh (vertex mode): its vertices and triangle centroids inside it.
+std::function<std::vector<Eigen::Vector3d>(const RegionShape&)> material_of(const TriangleMesh& mesh) {
+    return [&mesh](const RegionShape& shape) {
+        std::vector<Eigen::Vector3d> out;
+        for (const auto& v : mesh.vertices)
+            if (shape.contains(v)) out.push_back(v);
+        for (const auto& t : mesh.triangles) {
+            const Eigen::Vector3d c = (mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3;
+            if (shape.contains(c)) out.push_back(c);
+        }
+        return out;
+    };
+}
 
 /// Refuse constraint points far from the model: the data box grown by far_fraction of its size.
 void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double fraction) {
     const Eigen::Vector3d margin = fraction * (hi - lo);
     for (const auto& c : constraints) {
-        if (c.kind == ConstraintKind::control_point) continue;
-        if ((c.point.array() < (lo - margin).array()).any() || (c.point.array() > (hi + margin).array()).any())
-            throw InvalidInput(c.name + ": point (" + std::to_string(c.point.x()) + ", " + std::to_string(c.point.y()) + ", " +
-                               std::to_string(c.point.z()) + ") lies far outside the model (bounds " + std::to_string(lo.x()) + ".." +
-                               std::to_string(hi.x()) + ", " + std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " +
-                               std::to_string(lo.z()) + ".." + std::to_string(hi.z()) + ")");
+        if (c.kind == ConstraintKind::control_point || c.kind == ConstraintKind::region) continue; // a region's points are the model's
+        for (const Eigen::Vector3d& p : {c.point, c.kind == ConstraintKind::join ? c.to : c.point})
+            if ((p.array() < (lo - margin).array()).any() || (p.array() > (hi + margin).array()).any())
+                throw InvalidInput(c.name + ": point (" + std::to_string(p.x()) + ", " + std::to_string(p.y()) + ", " + std::to_string(p.z()) +
+                                   ") lies far outside the model (bounds " + std::to_string(lo.x()) + ".." + std::to_string(hi.x()) + ", " +
+                                   std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " + std::to_string(lo.z()) + ".." + std::to_string(hi.z()) + ")");
     }
 }
 
@@ -42,10 +130,19 @@ void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3
 std::vector<Constraint> step_constraints(const std::vector<Constraint>& constraints, int s, int steps) {
     std::vector<Constraint> out = constraints;
     for (auto& c : out) {
-        if (c.kind == ConstraintKind::move) {
+        if (c.kind == ConstraintKind::move || c.kind == ConstraintKind::turn) { // a frame's turn goes with its point
             const Eigen::Vector3d d = c.to - c.point;
             c.point = c.point + d * (double(s) / steps);
             c.to = c.point + d / steps;
+            if (c.kind == ConstraintKind::turn) {
+                Eigen::AngleAxisd turn(c.rotation);
+                turn.angle() /= steps;
+                c.rotation = turn.toRotationMatrix();
+            }
+        } else if (c.kind == ConstraintKind::join) { // each point a step of its way to their middle, the gap shrinking
+            const Eigen::Vector3d middle = (c.point + c.to) / 2;
+            const Eigen::Vector3d a = c.point + (middle - c.point) * (double(s) / steps), b = c.to + (middle - c.to) * (double(s) / steps);
+            c.point = a, c.to = a + (b - a) / double(steps - s);
         } else if (c.kind == ConstraintKind::control_point) {
             c.offset /= steps;
         }
@@ -64,23 +161,30 @@ ConstraintSolution solve_min_norm(const WarpDomain& domain, const std::vector<Co
 
 /// Solve one min-norm edit on `domain`, splitting it into as many steps (up to max_steps) as keep the map
 /// injective. Returns the step count; the solution is that of the first step.
-int plan_steps(const WarpDomain& domain, const Edit& edit, const DeformOptions& options, ConstraintSolution& first, bool& folds_remain, int& iterations) {
+int plan_steps(const WarpDomain& domain, const std::vector<Constraint>& rows, bool preserve_volume, const DeformOptions& options, ConstraintSolution& first,
+               bool& folds_remain, int& iterations) {
     for (int steps = 1;; steps *= 2) {
-        first = solve_min_norm(domain, step_constraints(edit.constraints, 0, steps), edit.preserve_volume, options.progress, iterations);
+        first = solve_min_norm(domain, step_constraints(rows, 0, steps), preserve_volume, options.progress, iterations);
         folds_remain = !find_folds(first.lattice).empty();
         if (!folds_remain || steps * 2 > options.max_steps) return steps;
     }
 }
 
-void record(EditReport& er, const ConstraintSolution& solution, const std::vector<Constraint>& constraints, int steps, double h) {
+/// The report's entry per constraint row of the edit; `owner` maps the solved rows (regions expanded) to them.
+void record(EditReport& er, const ConstraintSolution& solution, const std::vector<Constraint>& constraints, const std::vector<int>& owner, int steps, double h) {
     er.least_squares = solution.least_squares;
     er.rank = solution.rank;
     er.unknowns = solution.unknowns;
+    std::vector<double> worst(constraints.size(), 0.0);
+    for (std::size_t r = 0; r < owner.size(); ++r) worst[std::size_t(owner[r])] = std::max(worst[std::size_t(owner[r])], solution.residuals[r]);
+    const double length = solution.lattice.spacing().mean(); // a turn row's scale (constraint_rows)
     for (std::size_t c = 0; c < constraints.size(); ++c) {
         // A step's residual recurs in every step of the edit: report the edit's total.
-        const double r = solution.residuals[c] * steps;
+        const double r = worst[c] * steps;
         ConstraintReport cr;
-        cr.name = constraints[c].name, cr.kind = kind_name(constraints[c].kind), cr.residual = r, cr.residual_voxels = r / h;
+        cr.name = constraints[c].name, cr.kind = kind_name(constraints[c].kind), cr.entry = constraints[c].entry, cr.residual = r, cr.residual_voxels = r / h;
+        if (constraints[c].kind == ConstraintKind::turn) // |J d - R d| between unit vectors: the chord of the angle
+            cr.residual_degrees = 2 * std::asin(std::min(1.0, worst[c] / length / 2)) * 180 / M_PI * steps;
         er.constraints.push_back(std::move(cr));
     }
 }
@@ -202,6 +306,8 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
         const auto& n = voxmap.dims();
         const Eigen::Vector3d lo = voxmap.origin(), hi = voxmap.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
+        std::vector<int> owner;
+        const std::vector<Constraint> rows = expand_regions(constraints, material_of(voxmap), owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;
@@ -213,15 +319,15 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
         if (edit.solver == Solver::rigid) {
             // One solve, one warp: the rigid answer holds for the whole edit (steps along straight lines would
             // shorten a bend's chord), and its own energy keeps the map from folding; what folds remains is reported.
-            RigidSolution rs = solve_rigid(domain.lattice, constraints, lattice_material(domain),
+            RigidSolution rs = solve_rigid(domain.lattice, rows, lattice_material(domain),
                                            {.rigid = true, .preserve_volume = edit.preserve_volume, .progress = options.progress});
             er.iterations = rs.iterations;
             solution = std::move(rs);
             er.steps = 1;
         } else {
-            er.steps = plan_steps(domain, edit, options, solution, er.folds_remain, er.iterations);
+            er.steps = plan_steps(domain, rows, edit.preserve_volume, options, solution, er.folds_remain, er.iterations);
         }
-        record(er, solution, constraints, er.steps, h);
+        record(er, solution, constraints, owner, er.steps, h);
         er.seconds_solve += seconds_since(t);
         for (std::size_t c = 0; c < constraints.size(); ++c) {
             std::tie(er.constraints[c].source_miss_voxels, er.constraints[c].source_thin) = sources[c];
@@ -232,7 +338,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
             if (s > 0) {
                 t = Clock::now();
                 domain = make_domain(std::move(voxmap), script.lattice, options.voxelize.max_memory_bytes);
-                solution = solve_min_norm(domain, step_constraints(constraints, s, er.steps), edit.preserve_volume, options.progress, er.iterations);
+                solution = solve_min_norm(domain, step_constraints(rows, s, er.steps), edit.preserve_volume, options.progress, er.iterations);
                 er.seconds_solve += seconds_since(t);
             }
             if (s + 1 == er.steps) {
@@ -377,6 +483,8 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         if (e == 0) report.voxel_size = frame.voxel_size, report.dims = frame.dims, report.volume_before = enclosed_volume(out);
         const Eigen::Vector3d lo = frame.origin, hi = frame.world(double(frame.dims[0] - 1), double(frame.dims[1] - 1), double(frame.dims[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
+        std::vector<int> owner;
+        const std::vector<Constraint> rows = expand_regions(constraints, material_of(out), owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;
@@ -388,7 +496,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
             VoxelizeOptions vo = options.voxelize;
             vo.progress = options.progress;
             const WarpDomain domain = make_domain(voxelize_sparse(out, vo), script.lattice, options.voxelize.max_memory_bytes);
-            RigidSolution rs = solve_rigid(domain.lattice, constraints, lattice_material(domain),
+            RigidSolution rs = solve_rigid(domain.lattice, rows, lattice_material(domain),
                                            {.rigid = edit.solver == Solver::rigid, .preserve_volume = edit.preserve_volume, .progress = options.progress});
             er.iterations = rs.iterations;
             solution = std::move(rs);
@@ -396,7 +504,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         } else {
             const WarpDomain domain = make_domain(SparseVoxmap(frame.dims, frame.origin, frame.voxel_size), script.lattice, options.voxelize.max_memory_bytes);
             // Vertex mode applies the whole edit as one map: moving vertices needs no injective steps.
-            solution = solve_constraints(domain.lattice, constraints);
+            solution = solve_constraints(domain.lattice, rows);
             rest = domain.lattice;
         }
         er.seconds_solve = seconds_since(t);
@@ -404,7 +512,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         const auto folds = find_folds(solution.lattice);
         er.folds_remain = !folds.empty();
         er.folded_regions = int(folds.size());
-        record(er, solution, constraints, 1, frame.voxel_size);
+        record(er, solution, constraints, owner, 1, frame.voxel_size);
         er.volume_before = enclosed_volume(out);
         for (auto& v : out.vertices) v = solution.lattice.evaluate(rest.parameter_of(v));
         er.volume_after = enclosed_volume(out);

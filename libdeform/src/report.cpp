@@ -1,4 +1,5 @@
 // The deform report as JSON (README "Reports") and the warnings a user should read.
+#include <algorithm>
 #include <voxwarp/deform.h>
 #include <voxwarp/resources.h>
 
@@ -65,15 +66,32 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
         je["volume_after"] = e.volume_after;
         je["volume_change_percent"] = change_percent(e.volume_before, e.volume_after);
         je["constraints"] = nlohmann::json::array();
-        for (const auto& c : e.constraints) {
-            nlohmann::json jc = {{"name", c.name}, {"kind", c.kind}, {"residual", c.residual}, {"residual_voxels", c.residual_voxels}};
-            if (c.kind == "move") {
+        // One entry per entry of the edit file: a frame's move and turns, a connect's two moves, as one.
+        for (std::size_t i = 0; i < e.constraints.size();) {
+            const ConstraintReport& c = e.constraints[i];
+            std::size_t end = i + 1;
+            if (!c.entry.empty())
+                while (end < e.constraints.size() && e.constraints[end].name == c.name) ++end;
+            nlohmann::json jc = {{"name", c.name}, {"kind", c.entry.empty() ? c.kind : c.entry}};
+            double residual = 0, voxels = 0, degrees = -1;
+            for (std::size_t k = i; k < end; ++k) {
+                const ConstraintReport& row = e.constraints[k];
+                if (row.kind == "turn") {
+                    degrees = std::max(degrees, row.residual_degrees);
+                    continue;
+                }
+                residual = std::max(residual, row.residual), voxels = std::max(voxels, row.residual_voxels);
+            }
+            jc["residual"] = residual, jc["residual_voxels"] = voxels;
+            if (degrees >= 0) jc["residual_degrees"] = degrees;
+            if (c.kind == "move") { // a frame's point, the first of a connect's
                 jc["surface_miss_voxels"] = distance(c.surface_miss_voxels);
                 jc["source_miss_voxels"] = distance(c.source_miss_voxels);
                 if (c.model_miss_voxels >= 0) jc["model_miss_voxels"] = distance(c.model_miss_voxels);
                 if (!c.miss_cause.empty()) jc["miss_cause"] = c.miss_cause;
             }
             je["constraints"].push_back(jc);
+            i = end;
         }
         j["edits"].push_back(je);
     }
@@ -97,7 +115,10 @@ std::vector<std::string> deform_warnings(const DeformReport& r) {
     if (!r.sign_note.empty()) out.push_back("voxelize: " + r.sign_note);
     for (const auto& e : r.edits) {
         for (const auto& c : e.constraints) {
-            if (c.residual_voxels > 0.5) {
+            if (c.kind == "turn" && c.residual_degrees > 1) {
+                std::snprintf(line, sizeof line, "%s: the lattice map turns %.2f degrees away from the frame's rotation", c.name.c_str(), c.residual_degrees);
+                out.emplace_back(line);
+            } else if (c.kind != "turn" && c.residual_voxels > 0.5) {
                 std::snprintf(line, sizeof line, "%s: the lattice map misses its target by %.3g (%.2f voxels)", c.name.c_str(), c.residual, c.residual_voxels);
                 out.emplace_back(line);
             }

@@ -103,29 +103,56 @@ ConstraintRows constraint_rows(const Lattice& rest, const std::vector<Constraint
             out.hard[std::size_t(c)] = true;
             continue;
         }
+        if (k.kind == ConstraintKind::region)
+            throw InvalidInput(who + ": a region is solved as the points of the material inside it (expand_regions), not as one row");
         if (!k.point.allFinite() || !k.to.allFinite()) throw InvalidInput(who + ": point or target is not finite");
-        Eigen::Vector3d stu;
-        try {
-            stu = rest.parameter_of(k.point);
-        } catch (const SolverFailure&) {
-            throw InvalidInput(who + ": point (" + std::to_string(k.point.x()) + ", " + std::to_string(k.point.y()) + ", " +
-                               std::to_string(k.point.z()) + ") cannot be located in the lattice");
-        }
-        if (!rest.contains_parameter(stu, 1e-9))
-            throw InvalidInput(who + ": point (" + std::to_string(k.point.x()) + ", " + std::to_string(k.point.y()) + ", " + std::to_string(k.point.z()) +
-                               ") lies outside the lattice (parameter " + std::to_string(stu.x()) + ", " + std::to_string(stu.y()) + ", " +
-                               std::to_string(stu.z()) + ")");
-        // The parameter domain is closed: a point exactly on a face belongs to the last region, whose basis
-        // still gives it full weight (PyGeM#272: such points must move too).
-        const auto r = rest.regions();
-        for (int a = 0; a < 3; ++a) stu[a] = std::clamp(stu[a], 0.0, double(r[std::size_t(a)]));
+        // The parameter of a world point in the rest lattice, inside its closed domain.
+        auto parameter = [&](const Eigen::Vector3d& point) {
+            Eigen::Vector3d stu;
+            try {
+                stu = rest.parameter_of(point);
+            } catch (const SolverFailure&) {
+                throw InvalidInput(who + ": point (" + std::to_string(point.x()) + ", " + std::to_string(point.y()) + ", " +
+                                   std::to_string(point.z()) + ") cannot be located in the lattice");
+            }
+            if (!rest.contains_parameter(stu, 1e-9))
+                throw InvalidInput(who + ": point (" + std::to_string(point.x()) + ", " + std::to_string(point.y()) + ", " + std::to_string(point.z()) +
+                                   ") lies outside the lattice (parameter " + std::to_string(stu.x()) + ", " + std::to_string(stu.y()) + ", " +
+                                   std::to_string(stu.z()) + ")");
+            // The parameter domain is closed: a point exactly on a face belongs to the last region, whose basis
+            // still gives it full weight (PyGeM#272: such points must move too).
+            const auto r = rest.regions();
+            for (int a = 0; a < 3; ++a) stu[a] = std::clamp(stu[a], 0.0, double(r[std::size_t(a)]));
+            return stu;
+        };
+        auto add_terms = [&](const std::array<int, 3>& region, const std::array<double, 64>& w, double scale) {
+            for (int kk = 0; kk < 4; ++kk)
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 4; ++i)
+                        terms.emplace_back(group[rest.flat_index(region[0] + i, region[1] + j, region[2] + kk)], scale * w[std::size_t(i + 4 * (j + 4 * kk))]);
+        };
         std::array<int, 3> region;
         std::array<double, 64> w;
+        const Eigen::Vector3d stu = parameter(k.point);
+        if (k.kind == ConstraintKind::turn) {
+            // The derivative along the world direction d: the parameter direction the rest map takes to d. The row
+            // is scaled by one lattice spacing, so that it weighs like a point row across one cell.
+            if (!k.direction.allFinite() || std::abs(k.direction.norm() - 1) > 1e-9 || !k.rotation.allFinite())
+                throw InvalidInput(who + ": a turn needs a unit direction and a finite rotation");
+            const double length = rest.spacing().mean();
+            rest.derivative_weights(stu, rest.jacobian(stu).inverse() * k.direction, region, w);
+            add_terms(region, w, length);
+            out.D.row(c) = (length * (k.rotation * k.direction - k.direction)).transpose();
+            continue;
+        }
         rest.weights(stu, region, w);
-        for (int kk = 0; kk < 4; ++kk)
-            for (int j = 0; j < 4; ++j)
-                for (int i = 0; i < 4; ++i)
-                    terms.emplace_back(group[rest.flat_index(region[0] + i, region[1] + j, region[2] + kk)], w[std::size_t(i + 4 * (j + 4 * kk))]);
+        add_terms(region, w, 1.0);
+        if (k.kind == ConstraintKind::join) { // x(point) - x(to) = 0: both points' rows, the second subtracted
+            rest.weights(parameter(k.to), region, w);
+            add_terms(region, w, -1.0);
+            out.D.row(c) = (k.to - k.point).transpose();
+            continue;
+        }
         out.D.row(c) = (k.kind == ConstraintKind::pin ? Eigen::Vector3d::Zero() : Eigen::Vector3d(k.to - k.point)).transpose();
         out.hard[std::size_t(c)] = k.kind == ConstraintKind::pin;
     }

@@ -3,6 +3,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -96,12 +98,29 @@ LatticeSpec parse_lattice(const Context& ctx, const json& v) {
     return spec;
 }
 
-Constraint parse_constraint(const Context& ctx, const json& v, const std::string& path) {
+/// A rotation: {"axis": [x, y, z], "degrees": a} (and, where `pivot` is given, "pivot": p, default `pivot`).
+Eigen::Matrix3d parse_rotation(const Context& ctx, const json& v, const std::string& path, Eigen::Vector3d* pivot = nullptr) {
+    if (!v.is_object()) ctx.fail(path, "expected an object with \"axis\" and \"degrees\", got " + describe(v));
+    if (pivot) only_keys(ctx, v, path, {"axis", "degrees", "pivot"});
+    else only_keys(ctx, v, path, {"axis", "degrees"});
+    const Eigen::Vector3d axis = point3(ctx, require(ctx, v, path, "axis"), path + ".axis");
+    const double degrees = finite_number(ctx, require(ctx, v, path, "degrees"), path + ".degrees");
+    if (!(axis.norm() > 1e-12)) ctx.fail(path + ".axis", "expected a non-zero vector, got " + describe(v["axis"]));
+    if (std::abs(degrees) > 360) ctx.fail(path + ".degrees", "expected an angle in [-360, 360], got " + describe(v["degrees"]));
+    if (pivot && v.contains("pivot")) *pivot = point3(ctx, v["pivot"], path + ".pivot");
+    return Eigen::AngleAxisd(degrees * M_PI / 180, axis.normalized()).toRotationMatrix();
+}
+
+/// One entry of an edit's constraints, as the rows the solve takes (a frame is four, a connect with "at" two).
+void parse_constraint(const Context& ctx, const json& v, const std::string& path, std::vector<Constraint>& out) {
     if (!v.is_object()) ctx.fail(path, "expected an object, got " + describe(v));
     Constraint c;
     c.name = path;
-    const int kinds = int(v.contains("move")) + int(v.contains("pin")) + int(v.contains("control_point"));
-    if (kinds != 1) ctx.fail(path, "expected exactly one of \"move\", \"pin\", \"control_point\"");
+    static const char* kinds[] = {"move", "pin", "control_point", "frame", "region", "connect"};
+    int count = 0;
+    for (const char* k : kinds) count += int(v.contains(k));
+    if (count != 1) ctx.fail(path, "expected exactly one of \"move\", \"pin\", \"control_point\", \"frame\", \"region\", \"connect\"");
+    std::vector<Constraint> rows;
     if (v.contains("move")) {
         only_keys(ctx, v, path, {"move", "to", "weight"});
         c.kind = ConstraintKind::move;
@@ -111,20 +130,81 @@ Constraint parse_constraint(const Context& ctx, const json& v, const std::string
         only_keys(ctx, v, path, {"pin", "weight"});
         c.kind = ConstraintKind::pin;
         c.point = c.to = point3(ctx, v["pin"], path + ".pin");
-    } else {
+    } else if (v.contains("control_point")) {
         only_keys(ctx, v, path, {"control_point", "offset", "weight"});
         c.kind = ConstraintKind::control_point;
         const json& idx = v["control_point"];
         if (!idx.is_array() || idx.size() != 3) ctx.fail(path + ".control_point", "expected an array of three integers, got " + describe(idx));
         for (int a = 0; a < 3; ++a) c.control_point[std::size_t(a)] = integer(ctx, idx[std::size_t(a)], path + ".control_point[" + std::to_string(a) + "]");
         c.offset = point3(ctx, require(ctx, v, path, "offset"), path + ".offset");
+    } else if (v.contains("frame")) {
+        // P goes to Q (default: stays) and the map's Jacobian at P becomes the rotation (default: none): a move
+        // and the derivative along each axis.
+        only_keys(ctx, v, path, {"frame", "to", "rotate", "weight"});
+        c.kind = ConstraintKind::move;
+        c.entry = "frame";
+        c.point = point3(ctx, v["frame"], path + ".frame");
+        c.to = v.contains("to") ? point3(ctx, v["to"], path + ".to") : c.point;
+        const Eigen::Matrix3d rotation = v.contains("rotate") ? parse_rotation(ctx, v["rotate"], path + ".rotate") : Eigen::Matrix3d::Identity();
+        for (int a = 0; a < 3; ++a) {
+            Constraint t = c;
+            t.kind = ConstraintKind::turn;
+            t.direction = Eigen::Vector3d::Unit(a);
+            t.rotation = rotation;
+            rows.push_back(t);
+        }
+    } else if (v.contains("region")) {
+        only_keys(ctx, v, path, {"region", "translate", "rotate", "weight"});
+        c.kind = ConstraintKind::region;
+        c.entry = "region";
+        const json& r = v["region"];
+        const std::string rp = path + ".region";
+        if (!r.is_object() || r.size() != 1 || !(r.contains("sphere") || r.contains("box")))
+            ctx.fail(rp, "expected {\"sphere\": [[x, y, z], r]} or {\"box\": [[x, y, z], [x, y, z]]}, got " + describe(r));
+        if (r.contains("sphere")) {
+            const json& sph = r["sphere"];
+            if (!sph.is_array() || sph.size() != 2) ctx.fail(rp + ".sphere", "expected [[x, y, z], radius], got " + describe(sph));
+            c.region.sphere = true;
+            c.region.centre = point3(ctx, sph[0], rp + ".sphere[0]");
+            c.region.radius = finite_number(ctx, sph[1], rp + ".sphere[1]");
+            if (!(c.region.radius > 0)) ctx.fail(rp + ".sphere[1]", "expected a radius > 0, got " + describe(sph[1]));
+            c.pivot = c.region.centre;
+        } else {
+            const json& box = r["box"];
+            if (!box.is_array() || box.size() != 2) ctx.fail(rp + ".box", "expected [[x, y, z], [x, y, z]] (low and high corners), got " + describe(box));
+            c.region.sphere = false;
+            c.region.lo = point3(ctx, box[0], rp + ".box[0]");
+            c.region.hi = point3(ctx, box[1], rp + ".box[1]");
+            if (!(c.region.lo.array() < c.region.hi.array()).all()) ctx.fail(rp + ".box", "expected the low corner below the high one on every axis");
+            c.pivot = (c.region.lo + c.region.hi) / 2;
+        }
+        if (v.contains("translate")) c.offset = point3(ctx, v["translate"], path + ".translate");
+        if (v.contains("rotate")) c.rotation = parse_rotation(ctx, v["rotate"], path + ".rotate", &c.pivot);
+    } else {
+        only_keys(ctx, v, path, {"connect", "at", "weight"});
+        const json& pair = v["connect"];
+        if (!pair.is_array() || pair.size() != 2) ctx.fail(path + ".connect", "expected two points [[x, y, z], [x, y, z]], got " + describe(pair));
+        c.point = point3(ctx, pair[0], path + ".connect[0]");
+        c.to = point3(ctx, pair[1], path + ".connect[1]");
+        c.kind = ConstraintKind::join;
+        if (v.contains("at")) { // both go there: two moves
+            const Eigen::Vector3d at = point3(ctx, v["at"], path + ".at");
+            Constraint second = c;
+            c.kind = second.kind = ConstraintKind::move;
+            c.entry = second.entry = "connect";
+            second.point = c.to;
+            c.to = second.to = at;
+            rows.push_back(second);
+        }
     }
     if (v.contains("weight")) {
         const double w = finite_number(ctx, v["weight"], path + ".weight");
         if (!(w > 0)) ctx.fail(path + ".weight", "expected a number > 0, got " + describe(v["weight"]));
         c.weight = w;
+        for (auto& r : rows) r.weight = w;
     }
-    return c;
+    out.push_back(c);
+    out.insert(out.end(), rows.begin(), rows.end());
 }
 
 } // namespace edit_file_internal
@@ -165,8 +245,7 @@ EditScript parse_edit_script(const std::string& text, const std::string& source)
             if (!p.is_boolean()) ctx.fail(path + ".preserve_volume", "expected true or false, got " + describe(p));
             out.preserve_volume = p.get<bool>();
         }
-        for (std::size_t c = 0; c < list.size(); ++c)
-            out.constraints.push_back(parse_constraint(ctx, list[c], path + ".constraints[" + std::to_string(c) + "]"));
+        for (std::size_t c = 0; c < list.size(); ++c) parse_constraint(ctx, list[c], path + ".constraints[" + std::to_string(c) + "]", out.constraints);
         script.edits.push_back(std::move(out));
     }
     return script;

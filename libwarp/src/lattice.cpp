@@ -89,6 +89,22 @@ void Lattice::weights(const Eigen::Vector3d& stu, std::array<int, 3>& region, st
             for (int i = 0; i < 4; ++i) w[std::size_t(i + 4 * (j + 4 * k))] = b[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)];
 }
 
+void Lattice::derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector3d& dstu, std::array<int, 3>& region, std::array<double, 64>& w) const {
+    std::array<std::array<double, 4>, 3> b, d;
+    for (int a = 0; a < 3; ++a) {
+        double t;
+        region[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
+        b[std::size_t(a)] = cubic_basis(t);
+        d[std::size_t(a)] = cubic_basis_derivative(t);
+    }
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j)
+            for (int i = 0; i < 4; ++i) {
+                const std::size_t I = std::size_t(i), J = std::size_t(j), K = std::size_t(k);
+                w[I + 4 * (J + 4 * K)] = dstu.x() * d[0][I] * b[1][J] * b[2][K] + dstu.y() * b[0][I] * d[1][J] * b[2][K] + dstu.z() * b[0][I] * b[1][J] * d[2][K];
+            }
+}
+
 Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {
     std::array<int, 3> r;
     std::array<double, 64> w;

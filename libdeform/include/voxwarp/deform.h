@@ -31,9 +31,11 @@ struct DeformOptions {
 
 struct ConstraintReport {
     std::string name;              ///< its JSON path, e.g. "edits[0].constraints[2]"
-    std::string kind;              ///< "move", "pin" or "control_point"
-    double residual = 0;           ///< how far the lattice map misses the constraint, world units
+    std::string kind;              ///< "move", "pin", "control_point", "turn" (a frame's), "connect" or "region"
+    std::string entry;             ///< the edit file's entry when it is one of several rows: "frame", "region", "connect"
+    double residual = 0;           ///< how far the lattice map misses the constraint, world units (a region: its worst point)
     double residual_voxels = 0;
+    double residual_degrees = -1;  ///< turn: the angle between the map's derivative and the one asked for (< 0: not a turn)
     /// move constraints: distance from the target to the surface the edit produced (the output mesh for the last
     /// edit, the 0.5 isosurface of the edit's voxmap for earlier ones), voxels; < 0 when not measured.
     double surface_miss_voxels = -1;

@@ -26,6 +26,21 @@ enum class ConstraintKind {
     move,          ///< world point `point` goes to `to`
     pin,           ///< world point `point` stays where it is (hard)
     control_point, ///< control point `control_point` moves by `offset` (hard)
+    turn,          ///< the map's derivative at `point` along the world unit vector `direction` becomes `rotation * direction`
+                   ///< (a frame handle's orientation is three of these; `to` is its point's target, for split edits)
+    join,          ///< world points `point` and `to` end at the same place (wherever the least motion puts it)
+    region,        ///< the material inside `region` follows the rigid motion x -> rotation (x - pivot) + pivot + offset:
+                   ///< expanded by the deform into moves of points of the material there (expand_regions)
+};
+
+/// The shape of a region constraint: a sphere (centre, radius) or an axis-aligned box (lo, hi), world units.
+struct RegionShape {
+    bool sphere = true;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero(), lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero();
+    double radius = 0;
+    bool contains(const Eigen::Vector3d& p) const {
+        return sphere ? (p - centre).squaredNorm() <= radius * radius : (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all();
+    }
 };
 
 struct Constraint {
@@ -34,8 +49,15 @@ struct Constraint {
     Eigen::Vector3d to = Eigen::Vector3d::Zero();     ///< move: target world point
     std::array<int, 3> control_point{0, 0, 0};        ///< control_point: lattice index (i, j, k)
     Eigen::Vector3d offset = Eigen::Vector3d::Zero(); ///< control_point: world displacement
+    Eigen::Vector3d direction = Eigen::Vector3d::UnitX();     ///< turn: world unit vector
+    Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();   ///< turn, region: the rotation
+    Eigen::Vector3d pivot = Eigen::Vector3d::Zero();          ///< region: the rotation's fixed point (offset: the translation)
+    RegionShape region;                                       ///< region: where
     std::optional<double> weight;                     ///< explicit weight (> 0): the set is solved as weighted least squares
     std::string name;                                 ///< where it came from, for messages (e.g. "edits[0].constraints[2]")
+    /// The edit file's entry when it became several rows ("frame": a move and three turns; "region": moves;
+    /// "connect" with "at": two moves); empty otherwise. Rows of one entry share its name.
+    std::string entry;
 };
 
 struct SolveOptions {

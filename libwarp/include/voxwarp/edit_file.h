@@ -27,7 +27,8 @@ enum class Solver {
 std::string to_string(Solver solver);
 
 struct Edit {
-    std::vector<Constraint> constraints; ///< each named by its JSON path, e.g. "edits[0].constraints[2]"
+    std::vector<Constraint> constraints; ///< rows, each named by its entry's JSON path, e.g. "edits[0].constraints[2]" (a frame
+                                         ///< is four rows: a move and three turns; a connect with "at" two moves)
     Solver solver = Solver::min_norm;
     bool preserve_volume = false;        ///< keep the material's volume (det J = 1 over it), either solver
 };

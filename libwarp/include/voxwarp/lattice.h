@@ -71,6 +71,8 @@ public:
     /// The 64 basis weights of the control points that shape B at stu, and the region they belong to.
     /// weights[i + 4 (j + 4 k)] multiplies point(a+i, b+j, c+k).
     void weights(const Eigen::Vector3d& stu, std::array<int, 3>& region, std::array<double, 64>& weights) const;
+    /// The 64 weights of B's derivative at stu along the parameter direction `dstu`: sum_i w_i P_i = J(stu) dstu.
+    void derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector3d& dstu, std::array<int, 3>& region, std::array<double, 64>& weights) const;
 
     /// Parameter of a world point: exact (affine inverse) for an undeformed uniform lattice, Newton's method
     /// with the Jacobian otherwise, started from the undeformed guess. @throw SolverFailure when Newton does not
