@@ -472,7 +472,7 @@ TEST(Deform, ConnectedPointsMeet) {
 }
 
 TEST(EditFile, BundledExamplesParse) {
-    for (const char* name : {"bunny_ear.json", "bar_bend.json", "snowden_nose.json", "box_bend.json", "box_twist.json"})
+    for (const char* name : {"bunny_ear.json", "bar_bend.json", "snowden_nose.json", "box_bend.json", "box_twist.json", "box_frames.json", "bunny_ear_turn.json"})
         EXPECT_NO_THROW(read_edit_file(test::data_path(name))) << name;
 }
 
