@@ -35,7 +35,7 @@ for preview in (64, 96, 128):
         bpy.context.view_layer.update()  # the depsgraph handler runs the live update
         updates.append(time.perf_counter() - t)
     V, F, _ = core.source_arrays(bunny)
-    edit = core.edit_of(bunny, bunny.voxwarp, V, F)
+    edit = core.edit_of(bunny, bunny.voxwarp)
     alone = []
     for i in range(repeats):
         t = time.perf_counter()

@@ -31,12 +31,13 @@ origin.location = (-2, 0, 0)
 m = simple.modifiers.new("bend", "SIMPLE_DEFORM")
 m.deform_method, m.deform_axis, m.angle, m.origin = "BEND", "Z", math.pi / 2, origin
 
-# voxwarp: a held region on the left end, a handle on the right end moved and turned 90 degrees.
+# voxwarp: a handle on each end (frames), the left one left as it is, the right one moved and turned 90 degrees.
 box = checks.mesh_object("box", V, F)
 box.voxwarp.solver = "RIGID"
 box.voxwarp.resolution = 96
+box.voxwarp.lattice_size = (9, 5, 5)
 box.voxwarp.mesher = "FEATURES"  # the box keeps its edges
-checks.add(box, "REGION", (-2, 0, 0)).empty_display_size = 0.8
+checks.add(box, "HANDLE", (-2, 0, 0))
 handle = checks.add(box, "HANDLE", (2, 0, 0))
 handle.location = checks.bend(np.array([[2.0, 0, 0]]))[0]
 handle.rotation_euler = Euler((0, 0, math.pi / 2))

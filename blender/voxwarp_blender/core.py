@@ -6,13 +6,14 @@ exported edit file holds and an exported mesh is written in, so that `voxwarp de
 reproduces a deform made here byte for byte.
 
 A handle is an Empty parented to the mesh whose custom properties record what it is:
-  voxwarp_kind   "handle" (move a point, and turn it if the Empty is turned), "pin" (hold a point) or
-                 "region" (a sphere, radius = display size x scale: the surface inside follows the Empty's
-                 rigid motion, or is held still if the Empty has not moved). Any of them shown as a sphere
-                 (Empty display "Sphere") is a region.
+  voxwarp_kind   "handle" (a frame: its point and orientation), "pin" (hold a point) or "region" (a
+                 sphere, radius = display size x scale: the material inside follows the Empty's rigid motion,
+                 or is held still if the Empty has not moved). Any of them shown as a sphere (Empty display
+                 "Sphere") is a region.
   voxwarp_rest   where the handle was put (location, 3 doubles) and its rotation then (quaternion w x y z)
   voxwarp_to     the exact target read from an edit file, used while the Empty stays where it was put
   voxwarp_weight optional weight (> 0) of its constraints
+  voxwarp_point_only  a handle read from a file's "move": written back as a move while it is not turned
 The Empty's current location and rotation are its target.
 """
 
@@ -30,10 +31,10 @@ import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
 KIND, REST, TO, WEIGHT = "voxwarp_kind", "voxwarp_rest", "voxwarp_to", "voxwarp_weight"
+POINT_ONLY = "voxwarp_point_only"  # a handle read from a file's "move": its orientation is free until it is turned
 EXTRA = "voxwarp_extra"  # on the mesh object: JSON of what Empties cannot show (earlier edits, control points)
 KINDS = ("handle", "pin", "region")
 DISPLAY = {"handle": "ARROWS", "pin": "PLAIN_AXES", "region": "SPHERE"}
-REGION_POINTS = 16  # surface points a region's motion is imposed on
 
 # ---- finding the compiled module ----------------------------------------------------------------------------------
 
@@ -253,29 +254,17 @@ def _scale(e):
     return max(abs(s) for s in m.to_scale())
 
 
-def region_points(V, F, centre, radius, count=REGION_POINTS):
-    """Up to `count` points of the surface inside a sphere, spread out: vertices, edge midpoints and triangle
-    centroids inside it, thinned by farthest-point sampling (deterministic)."""
-    c = np.asarray(centre, np.float64)
-    t = V[F]
-    candidates = np.concatenate([V, (t[:, 0] + t[:, 1]) / 2, (t[:, 1] + t[:, 2]) / 2, (t[:, 2] + t[:, 0]) / 2, t.mean(axis=1)])
-    inside = candidates[((candidates - c) ** 2).sum(axis=1) <= radius * radius]
-    if len(inside) == 0:
-        return inside
-    inside = np.unique(inside, axis=0)
-    chosen = [int(np.argmin(((inside - c) ** 2).sum(axis=1)))]
-    distance = ((inside - inside[chosen[0]]) ** 2).sum(axis=1)
-    while len(chosen) < min(count, len(inside)):
-        k = int(np.argmax(distance))
-        if distance[k] <= 0:
-            break
-        chosen.append(k)
-        distance = np.minimum(distance, ((inside - inside[k]) ** 2).sum(axis=1))
-    return inside[chosen]
+def _rotate(turn, pivot=None):
+    rotate = {"axis": [float(x) for x in turn.axis], "degrees": math.degrees(turn.angle)}
+    if pivot is not None:
+        rotate["pivot"] = pivot
+    return rotate
 
 
-def constraints_of(obj, V, F):
-    """The edit-file constraints the mesh's handles stand for (local frame)."""
+def constraints_of(obj):
+    """The edit-file entries the mesh's handles stand for (local frame): a handle is a frame (its point to the
+    Empty's location, the map there turned as the Empty is; a handle read from a file's move stays a move until it
+    is turned); a pin a pin; a region a region (a sphere), with the Empty's motion from its rest as its own."""
     out = []
     for e in handles(obj):
         kind = kind_of(e)
@@ -284,31 +273,24 @@ def constraints_of(obj, V, F):
         location, rotation = local_frame(e)
         to = _exact(e, location)
         turn = rotation @ rest_rotation.inverted()
-        turned = abs(turn.angle) > 1e-6 and abs(turn.angle - 2 * math.pi) > 1e-6
-        weight = {"weight": float(e[WEIGHT])} if WEIGHT in e else {}
-        here = []
+        turned = abs(math.remainder(turn.angle, 2 * math.pi)) > 1e-6
         if kind == "pin":
-            here.append({"pin": to})
+            c = {"pin": to}
+        elif kind == "handle" and e.get(POINT_ONLY) and not turned:
+            c = {"move": exact_rest, "to": to}
         elif kind == "handle":
-            here.append({"move": exact_rest, "to": to})
-            if turned:  # its orientation: three arm points carried by the Empty's turn (a frame constraint, #23)
-                arm = e.empty_display_size * _scale(e)
-                for axis in range(3):
-                    a = rest_rotation @ Vector([arm if i == axis else 0.0 for i in range(3)])
-                    here.append({"move": [float(x) for x in rest + a], "to": [float(x) for x in Vector(to) + turn @ a]})
+            c = {"frame": exact_rest, "to": to}
+            if turned:
+                c["rotate"] = _rotate(turn)
         else:
-            radius = e.empty_display_size * _scale(e)
-            points = region_points(V, F, exact_rest, radius)
-            if len(points) == 0:
-                raise ValueError(f"{e.name}: the region (radius {radius:.4g}) holds no part of {obj.name}'s surface")
-            moved = turned or Vector(to) != rest
-            for p in points:
-                if moved:
-                    q = Vector(to) + turn @ (Vector(p) - rest)
-                    here.append({"move": [float(x) for x in p], "to": [float(x) for x in q]})
-                else:
-                    here.append({"pin": [float(x) for x in p]})
-        out += [dict(c, **weight) for c in here]
+            c = {"region": {"sphere": [exact_rest, e.empty_display_size * _scale(e)]}}
+            if Vector(to) != rest:
+                c["translate"] = [float(t) - float(r) for t, r in zip(to, exact_rest)]
+            if turned:
+                c["rotate"] = _rotate(turn, exact_rest)
+        if WEIGHT in e:
+            c["weight"] = float(e[WEIGHT])
+        out.append(c)
     return out
 
 
@@ -321,10 +303,10 @@ def extra_of(obj):
     return {"earlier": extra.get("earlier", []), "constraints": extra.get("constraints", [])}
 
 
-def edit_of(obj, settings, V, F):
+def edit_of(obj, settings):
     """The edit (a dict in the edit-file schema) the mesh's handles and settings stand for."""
     extra = extra_of(obj)
-    constraints = constraints_of(obj, V, F) + extra["constraints"]
+    constraints = constraints_of(obj) + extra["constraints"]
     if not constraints:
         raise ValueError(f"{obj.name}: no handles: add a handle (and a pin or a region to hold what should stay)")
     return {
@@ -345,9 +327,19 @@ def edit_text(edit):
     return "\n".join(lines + ["  ]", "}"]) + "\n"
 
 
+def _turn(e, rotate):
+    """The Empty turned by an edit file's rotation (about its own location)."""
+    if rotate:
+        e.rotation_mode = "QUATERNION"
+        e.rotation_quaternion = Quaternion(Vector(rotate["axis"]).normalized(), math.radians(rotate["degrees"]))
+        e.rotation_mode = "XYZ"
+
+
 def import_edit(obj, edit, settings, size):
-    """Handles for an edit file's last edit (moves become handles at their targets, pins pins); its lattice and
-    solver go into the settings; earlier edits and control-point offsets are kept on the mesh as they are."""
+    """Handles for an edit file's last edit (moves and frames become handles at their targets, turned as the
+    frame says; pins pins; sphere regions sphere Empties moved and turned by their motion); its lattice and solver go
+    into the settings; earlier edits, control-point offsets, box regions and connects are kept on the mesh as they
+    are."""
     module().read_edit(edit)  # refused here with the file's own message if malformed
     for e in handles(obj):
         bpy.data.objects.remove(e)
@@ -361,11 +353,24 @@ def import_edit(obj, edit, settings, size):
     settings.preserve_volume = last.get("preserve_volume", False)
     kept = []
     for c in last["constraints"]:
+        weight = c.get("weight")
         if "move" in c:
-            add_handle(obj, "handle", c["move"], size, target=c["to"], weight=c.get("weight"))
+            add_handle(obj, "handle", c["move"], size, target=c["to"], weight=weight)[POINT_ONLY] = True
         elif "pin" in c:
-            add_handle(obj, "pin", c["pin"], size, weight=c.get("weight"))
-        else:
+            add_handle(obj, "pin", c["pin"], size, weight=weight)
+        elif "frame" in c:
+            e = add_handle(obj, "handle", c["frame"], size, target=c.get("to", c["frame"]), weight=weight)
+            _turn(e, c.get("rotate"))
+        elif "region" in c and "sphere" in c["region"]:
+            # The Empty rests at the sphere's centre; its motion is the region's, whatever the pivot.
+            centre, radius = c["region"]["sphere"]
+            rotate = c.get("rotate")
+            turn = Quaternion(Vector(rotate["axis"]).normalized(), math.radians(rotate["degrees"])) if rotate else Quaternion()
+            pivot = Vector(rotate.get("pivot", centre)) if rotate else Vector(centre)
+            moved = turn @ (Vector(centre) - pivot) + pivot + Vector(c.get("translate", (0, 0, 0)))
+            e = add_handle(obj, "region", centre, radius, target=list(moved), weight=weight)
+            _turn(e, rotate)
+        else:  # control-point offsets, box regions, connects: kept as they are
             kept.append(c)
     obj[EXTRA] = json.dumps({"earlier": edit["edits"][:-1], "constraints": kept})
     return len(last["constraints"]) - len(kept), kept
@@ -378,7 +383,7 @@ def deform(obj, settings, resolution=None, depsgraph=None, preview=False, modifi
     as its modifiers leave it (what the viewport shows), else its own mesh."""
     vw = module(settings.module_preference())
     V, F, attributes = source_arrays(obj, depsgraph, modifiers)
-    edit = edit_of(obj, settings, V, F)
+    edit = edit_of(obj, settings)
     size = {"voxel_size": settings.voxel_size} if settings.voxel_size > 0 and resolution is None else {"resolution": resolution or settings.resolution}
     result = vw.deform(V, F, edit, **size, mesher="features" if settings.mesher == "FEATURES" else "mc", snap=settings.snap and not preview,
                        attributes=attributes, progress=progress)

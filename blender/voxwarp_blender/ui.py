@@ -177,7 +177,7 @@ class VOXWARP_OT_export_edit(_OnMesh, ExportHelper, bpy.types.Operator):
         obj = core.source_of(context.active_object)
         try:
             V, F, attributes = core.source_arrays(obj)
-            text = core.edit_text(core.edit_of(obj, obj.voxwarp, V, F))
+            text = core.edit_text(core.edit_of(obj, obj.voxwarp))
             partial = self.filepath + ".part"
             with open(partial, "w") as f:
                 f.write(text)
