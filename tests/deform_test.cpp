@@ -130,6 +130,9 @@ TEST(EditFile, MalformedScriptsNameThePathAndWhatWasExpected) {
         {R"({"edits": [{"constraints": [{"region": {"ball": [[0, 0, 0], 1]}}]}]})", "edits[0].constraints[0].region: expected {\"sphere\""},
         {R"({"edits": [{"constraints": [{"region": {"sphere": [[0, 0, 0], 1]}, "to": [1, 1, 1]}]}]})", "edits[0].constraints[0].to: unknown field"},
         {R"({"edits": [{"constraints": [{"connect": [[0, 0, 0]]}]}]})", "edits[0].constraints[0].connect: expected two points"},
+        {R"({"edits": [{"constraints": [{"normal": [0, 0, 0], "direction": [0, 0, 0]}]}]})", "edits[0].constraints[0].direction: expected a non-zero vector"},
+        {R"({"edits": [{"constraints": [{"normal": [0, 0, 0]}]}]})", "edits[0].constraints[0]: missing field \"direction\""},
+        {R"({"edits": [{"constraints": [{"slide": [0, 0]}]}]})", "edits[0].constraints[0].slide: expected an array of three"},
         {R"({"edits": [{"constraints": [{"connect": [[0, 0, 0], [1, 1, 1]], "pin": [0, 0, 0]}]}]})", "expected exactly one of"},
     };
     for (const auto& [text, expected] : cases) {
@@ -469,6 +472,58 @@ TEST(Deform, ConnectedPointsMeet) {
     ASSERT_EQ(report.edits[0].constraints.size(), 3u); // two moves of one entry, and the pin
     EXPECT_EQ(report.edits[0].constraints[0].entry, "connect");
     EXPECT_EQ(report.edits[0].constraints[1].name, report.edits[0].constraints[0].name);
+}
+
+TEST(Deform, NormalsTurnAndSurfacesSlideOntoPoints) {
+    // A sphere: the normal at (1, 0, 0) turned 20 degrees towards +y, the point pinned there too (a normal leaves
+    // the point free: without the pin the rigid solve slides the cap, and the faces near (1, 0, 0) are others); then
+    // the surface pulled through a point off it, which material point touches it left to the edit. Pins on the far side.
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 5);
+    DeformOptions options;
+    options.voxelize.resolution = 64;
+    const Eigen::Vector3d N = Eigen::AngleAxisd(20 * std::numbers::pi / 180, Eigen::Vector3d::UnitZ()) * Eigen::Vector3d::UnitX();
+    for (const char* solver : {"min-norm", "rigid"}) {
+        SCOPED_TRACE(solver);
+        DeformReport report;
+        const TriangleMesh out = deform_mesh(
+            sphere,
+            parse_edit_script(std::string(R"({"edits": [{"solver": ")") + solver + R"(", "constraints": [{"normal": [1, 0, 0], "direction": [)" +
+                                  std::to_string(N.x()) + ", " + std::to_string(N.y()) + R"(, 0]}, {"pin": [1, 0, 0]}, {"pin": [-1, 0, 0]}, {"pin": [0, -1, 0]}]}]})",
+                              "normal.json"),
+            options, report);
+        const double h = report.voxel_size;
+        // The output's faces within a voxel of the point: their mean angle to N.
+        double sum = 0, area = 0;
+        for (const auto& t : out.triangles) {
+            const Eigen::Vector3d &a = out.vertices[std::size_t(t[0])], &b = out.vertices[std::size_t(t[1])], &c = out.vertices[std::size_t(t[2])];
+            if (((a + b + c) / 3 - Eigen::Vector3d(1, 0, 0)).norm() > h) continue;
+            const Eigen::Vector3d n = (b - a).cross(c - a);
+            sum += n.norm() * std::acos(std::clamp(n.normalized().dot(N), -1.0, 1.0)) * 180 / std::numbers::pi, area += n.norm();
+        }
+        const double degrees = sum / area;
+        std::printf("%s: normal asked 20 degrees off: the output's faces within a voxel of the point are %.2f degrees from it (the solve's own %.2e)\n",
+                    solver, degrees, report.edits[0].constraints[0].residual_degrees);
+        EXPECT_GT(area, 0);
+        EXPECT_LE(degrees, 3.0); // the issue's bar
+        EXPECT_EQ(report.edits[0].constraints[0].kind, "normal");
+    }
+    const Eigen::Vector3d Q(1.15, 0.3, 0.1);
+    for (const char* solver : {"min-norm", "rigid"}) {
+        SCOPED_TRACE(solver);
+        DeformReport report;
+        const TriangleMesh out = deform_mesh(
+            sphere, parse_edit_script(std::string(R"({"edits": [{"solver": ")") + solver + R"(", "constraints": [{"slide": [1.15, 0.3, 0.1]}, {"pin": [-1, 0, 0]}]}]})", "slide.json"),
+            options, report);
+        const double h = report.voxel_size;
+        const double before = (Q.norm() - 1) / h, after = distances_to_surface({Q}, out)[0] / h;
+        std::printf("%s: slide: the point %.2f voxels off the sphere, %.3f voxels from the output\n", solver, before, after);
+        EXPECT_GT(before, 3);
+        EXPECT_LE(after, 0.5); // the issue's bar
+        EXPECT_EQ(report.edits[0].constraints[0].kind, "slide");
+    }
+    // A normal or slide with no surface near it is refused with its name.
+    DeformReport report;
+    EXPECT_THROW(deform_mesh(sphere, parse_edit_script(R"({"edits": [{"constraints": [{"slide": [0, 0, 0]}]}]})", "far.json"), options, report), InvalidInput);
 }
 
 TEST(EditFile, BundledExamplesParse) {

@@ -35,22 +35,47 @@ std::string kind_name(ConstraintKind k) {
     case ConstraintKind::turn: return "turn";
     case ConstraintKind::join: return "connect";
     case ConstraintKind::region: return "region";
+    case ConstraintKind::normal: return "normal";
+    case ConstraintKind::slide: return "slide";
     }
     return "?";
 }
 
 constexpr int kRegionPoints = 32; // material points a region's rigid motion is imposed on
 
-/// The rows the solve takes for an edit's constraints: each region becomes moves of up to kRegionPoints points of
-/// the material inside it (`material(shape)` lists candidates), spread by farthest-point sampling from the one
-/// nearest its middle, each carried by the region's rigid motion (or held, if it has none). owner[r]: the
-/// constraint row r comes from.
-std::vector<Constraint> expand_regions(const std::vector<Constraint>& constraints, const std::function<std::vector<Eigen::Vector3d>(const RegionShape&)>& material,
-                                       std::vector<int>& owner) {
+/// The model's surface near a point: its nearest point and the outward normal there; {point, zero} when there is
+/// no surface within reach.
+using NearestSurface = std::function<std::pair<Eigen::Vector3d, Eigen::Vector3d>(const Eigen::Vector3d&)>;
+
+/// The rows the solve takes for an edit's constraints, where an entry needs the model: each region becomes moves
+/// of up to kRegionPoints points of the material inside it (`material(shape)` lists candidates), spread by
+/// farthest-point sampling from the one nearest its middle, each carried by the region's rigid motion (or held, if
+/// it has none); a normal becomes two turns of the surface's tangents there by the least rotation from its normal
+/// to the asked direction; a slide a move of the surface point nearest to it. owner[r]: the constraint row r comes from.
+std::vector<Constraint> expand_entries(const std::vector<Constraint>& constraints, const std::function<std::vector<Eigen::Vector3d>(const RegionShape&)>& material,
+                                       const NearestSurface& nearest, std::vector<int>& owner) {
     std::vector<Constraint> rows;
     owner.clear();
     for (std::size_t c = 0; c < constraints.size(); ++c) {
         const Constraint& k = constraints[c];
+        if (k.kind == ConstraintKind::normal || k.kind == ConstraintKind::slide) {
+            const auto [on, normal] = nearest(k.point);
+            if (normal.isZero()) throw InvalidInput(k.name + ": no surface of the model within 16 voxels of the point");
+            if (k.kind == ConstraintKind::slide) {
+                Constraint m = k;
+                m.kind = ConstraintKind::move, m.point = on, m.to = k.to;
+                rows.push_back(m), owner.push_back(int(c));
+                continue;
+            }
+            const Eigen::Matrix3d turn = Eigen::Quaterniond::FromTwoVectors(normal, k.direction).toRotationMatrix();
+            const Eigen::Vector3d t1 = normal.unitOrthogonal(), t2 = normal.cross(t1);
+            for (const Eigen::Vector3d& t : {t1, t2}) {
+                Constraint r = k;
+                r.kind = ConstraintKind::turn, r.point = r.to = k.point, r.direction = t, r.rotation = turn;
+                rows.push_back(r), owner.push_back(int(c));
+            }
+            continue;
+        }
         if (k.kind != ConstraintKind::region) {
             rows.push_back(k), owner.push_back(int(c));
             continue;
@@ -75,6 +100,16 @@ std::vector<Constraint> expand_regions(const std::vector<Constraint>& constraint
         }
     }
     return rows;
+}
+
+/// The nearest point of a mesh to `point` within `reach` and its face's normal (zero: none).
+std::pair<Eigen::Vector3d, Eigen::Vector3d> nearest_on(const SourceSurface& surface, const Eigen::Vector3d& point, double reach) {
+    const SourcePoint s = surface.nearest(point, Eigen::Vector3d::Zero(), reach);
+    if (s.face < 0) return {point, Eigen::Vector3d::Zero()};
+    const TriangleMesh& m = surface.mesh();
+    const auto& t = m.triangles[std::size_t(s.face)];
+    const Eigen::Vector3d &a = m.vertices[std::size_t(t[0])], &b = m.vertices[std::size_t(t[1])], &c = m.vertices[std::size_t(t[2])];
+    return {s.barycentric[0] * a + s.barycentric[1] * b + s.barycentric[2] * c, (b - a).cross(c - a).normalized()};
 }
 
 /// Candidates for a region's points in a voxmap: the centres of the voxels inside it at or over density 0.5.
@@ -183,16 +218,16 @@ void record(EditReport& er, const ConstraintSolution& solution, const std::vecto
         const double r = worst[c] * steps;
         ConstraintReport cr;
         cr.name = constraints[c].name, cr.kind = kind_name(constraints[c].kind), cr.entry = constraints[c].entry, cr.residual = r, cr.residual_voxels = r / h;
-        if (constraints[c].kind == ConstraintKind::turn) // |J d - R d| between unit vectors: the chord of the angle
+        if (constraints[c].kind == ConstraintKind::turn || constraints[c].kind == ConstraintKind::normal) // |J d - R d|: the chord of the angle
             cr.residual_degrees = 2 * std::asin(std::min(1.0, worst[c] / length / 2)) * 180 / M_PI * steps;
         er.constraints.push_back(std::move(cr));
     }
 }
 
-/// Distance from a world point to the 0.5 isosurface of `voxmap`, voxels, looking no farther than `reach` voxels
-/// (+infinity beyond). Marching cubes is local to each cell, so meshing a window around the point gives the very
-/// faces the whole voxmap's extraction has there; faces the window's own border closes are left out.
-double distance_to_isosurface(const SparseVoxmap& voxmap, const Eigen::Vector3d& point, double reach) {
+/// The 0.5 isosurface of `voxmap` within about `reach` voxels of a world point. Marching cubes is local to each
+/// cell, so meshing a window around the point gives the very faces the whole voxmap's extraction has there; faces
+/// the window's own border closes are left out.
+TriangleMesh isosurface_near(const SparseVoxmap& voxmap, const Eigen::Vector3d& point, double reach) {
     const double h = voxmap.voxel_size();
     const Eigen::Vector3d centre = voxmap.index_of(point);
     const std::int64_t half = std::int64_t(std::ceil(reach)) + 2;
@@ -221,11 +256,27 @@ double distance_to_isosurface(const SparseVoxmap& voxmap, const Eigen::Vector3d&
     };
     for (const auto& t : mesh.triangles)
         if (inside(t[0]) && inside(t[1]) && inside(t[2])) inner.triangles.push_back(t);
+    return inner;
+}
+
+/// Distance from a world point to the 0.5 isosurface of `voxmap`, voxels, looking no farther than `reach` voxels
+/// (+infinity beyond).
+double distance_to_isosurface(const SparseVoxmap& voxmap, const Eigen::Vector3d& point, double reach) {
+    const TriangleMesh inner = isosurface_near(voxmap, point, reach);
     if (inner.triangles.empty()) return std::numeric_limits<double>::infinity();
-    return distances_to_surface_within({point}, inner, reach * h)[0] / h;
+    return distances_to_surface_within({point}, inner, reach * voxmap.voxel_size())[0] / voxmap.voxel_size();
 }
 
 constexpr double kMissReach = 16; // voxels: misses beyond this are reported as "more than 16"
+
+/// The voxmap's surface nearest to a point (its isosurface near it).
+NearestSurface nearest_of(const SparseVoxmap& voxmap) {
+    return [&voxmap](const Eigen::Vector3d& point) -> std::pair<Eigen::Vector3d, Eigen::Vector3d> {
+        const TriangleMesh near = isosurface_near(voxmap, point, kMissReach);
+        if (near.triangles.empty()) return {point, Eigen::Vector3d::Zero()};
+        return nearest_on(SourceSurface(near), point, kMissReach * voxmap.voxel_size());
+    };
+}
 
 /// Where the moves start, measured on the voxmap an edit starts from (before the warp consumes it): how far each
 /// point lies from its surface, and whether the feature under it is missing from the voxmap (no voxel within a
@@ -307,7 +358,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
         const Eigen::Vector3d lo = voxmap.origin(), hi = voxmap.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
         std::vector<int> owner;
-        const std::vector<Constraint> rows = expand_regions(constraints, material_of(voxmap), owner);
+        const std::vector<Constraint> rows = expand_entries(constraints, material_of(voxmap), nearest_of(voxmap), owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;
@@ -484,7 +535,11 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         const Eigen::Vector3d lo = frame.origin, hi = frame.world(double(frame.dims[0] - 1), double(frame.dims[1] - 1), double(frame.dims[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
         std::vector<int> owner;
-        const std::vector<Constraint> rows = expand_regions(constraints, material_of(out), owner);
+        std::unique_ptr<SourceSurface> surface; // indexed only when an entry asks for the surface
+        const std::vector<Constraint> rows = expand_entries(constraints, material_of(out), [&](const Eigen::Vector3d& p) {
+            if (!surface) surface = std::make_unique<SourceSurface>(out);
+            return nearest_on(*surface, p, kMissReach * frame.voxel_size);
+        }, owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;

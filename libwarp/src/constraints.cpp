@@ -103,8 +103,8 @@ ConstraintRows constraint_rows(const Lattice& rest, const std::vector<Constraint
             out.hard[std::size_t(c)] = true;
             continue;
         }
-        if (k.kind == ConstraintKind::region)
-            throw InvalidInput(who + ": a region is solved as the points of the material inside it (expand_regions), not as one row");
+        if (k.kind == ConstraintKind::region || k.kind == ConstraintKind::normal || k.kind == ConstraintKind::slide)
+            throw InvalidInput(who + ": a region, normal or slide needs the model's surface: the deform turns it into rows, the solver takes none");
         if (!k.point.allFinite() || !k.to.allFinite()) throw InvalidInput(who + ": point or target is not finite");
         // The parameter of a world point in the rest lattice, inside its closed domain.
         auto parameter = [&](const Eigen::Vector3d& point) {

@@ -116,10 +116,11 @@ void parse_constraint(const Context& ctx, const json& v, const std::string& path
     if (!v.is_object()) ctx.fail(path, "expected an object, got " + describe(v));
     Constraint c;
     c.name = path;
-    static const char* kinds[] = {"move", "pin", "control_point", "frame", "region", "connect"};
+    static const char* kinds[] = {"move", "pin", "control_point", "frame", "region", "connect", "normal", "slide"};
     int count = 0;
     for (const char* k : kinds) count += int(v.contains(k));
-    if (count != 1) ctx.fail(path, "expected exactly one of \"move\", \"pin\", \"control_point\", \"frame\", \"region\", \"connect\"");
+    if (count != 1)
+        ctx.fail(path, "expected exactly one of \"move\", \"pin\", \"control_point\", \"frame\", \"region\", \"connect\", \"normal\", \"slide\"");
     std::vector<Constraint> rows;
     if (v.contains("move")) {
         only_keys(ctx, v, path, {"move", "to", "weight"});
@@ -180,6 +181,19 @@ void parse_constraint(const Context& ctx, const json& v, const std::string& path
         }
         if (v.contains("translate")) c.offset = point3(ctx, v["translate"], path + ".translate");
         if (v.contains("rotate")) c.rotation = parse_rotation(ctx, v["rotate"], path + ".rotate", &c.pivot);
+    } else if (v.contains("normal")) {
+        only_keys(ctx, v, path, {"normal", "direction", "weight"});
+        c.kind = ConstraintKind::normal;
+        c.entry = "normal";
+        c.point = c.to = point3(ctx, v["normal"], path + ".normal");
+        const Eigen::Vector3d n = point3(ctx, require(ctx, v, path, "direction"), path + ".direction");
+        if (!(n.norm() > 1e-12)) ctx.fail(path + ".direction", "expected a non-zero vector, got " + describe(v["direction"]));
+        c.direction = n.normalized();
+    } else if (v.contains("slide")) {
+        only_keys(ctx, v, path, {"slide", "weight"});
+        c.kind = ConstraintKind::slide;
+        c.entry = "slide";
+        c.point = c.to = point3(ctx, v["slide"], path + ".slide");
     } else {
         only_keys(ctx, v, path, {"connect", "at", "weight"});
         const json& pair = v["connect"];

@@ -30,7 +30,11 @@ enum class ConstraintKind {
                    ///< (a frame handle's orientation is three of these; `to` is its point's target, for split edits)
     join,          ///< world points `point` and `to` end at the same place (wherever the least motion puts it)
     region,        ///< the material inside `region` follows the rigid motion x -> rotation (x - pivot) + pivot + offset:
-                   ///< expanded by the deform into moves of points of the material there (expand_regions)
+                   ///< expanded by the deform into moves of points of the material there
+    normal,        ///< the surface normal at `point` ends along `direction` (unit): expanded by the deform into two
+                   ///< turns of the surface's tangents by the least rotation from its normal there to `direction`
+    slide,         ///< the surface passes through `to` (= `point`): expanded by the deform into a move of the surface
+                   ///< point nearest to it
 };
 
 /// The shape of a region constraint: a sphere (centre, radius) or an axis-aligned box (lo, hi), world units.
