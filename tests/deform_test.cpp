@@ -100,6 +100,22 @@ TEST(Deform, FarAwayConstraintIsRefused) {
         EXPECT_NE(std::string(e.what()).find("edits[0].constraints[0]"), std::string::npos) << e.what();
         EXPECT_NE(std::string(e.what()).find("far outside"), std::string::npos) << e.what();
     }
+    // A target more than the model's size outside its bounds (the handles issue's [9, 0, 0] on the 4 x 1 x 1 box,
+    // which grew its volume 47 %); the bend's targets, 2 units above a box 1 unit high, stay allowed.
+    const TriangleMesh box = test::box_mesh({-2, -0.5, -0.5}, {2, 0.5, 0.5}, 1);
+    EditScript far;
+    far.edits.push_back({{move({2, 0, 0}, {9, 0, 0}, "edits[0].constraints[1]"), pin({-2, 0, 0})}});
+    try {
+        deform_mesh(box, far, {}, report);
+        FAIL() << "expected InvalidInput";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("edits[0].constraints[1].to: target (9.000000, 0.000000, 0.000000) lies more than the model's size"),
+                  std::string::npos)
+            << e.what();
+    }
+    DeformOptions coarse;
+    coarse.voxelize.resolution = 32;
+    EXPECT_NO_THROW(deform_mesh(box, read_edit_file(test::data_path("box_bend.json")), coarse, report));
 }
 
 TEST(EditFile, MalformedScriptsNameThePathAndWhatWasExpected) {

@@ -17,7 +17,8 @@
   const state = { lattice: null, edits: [], current: { solver: 'min-norm', preserve_volume: false, constraints: [] } };
   let selected = -1;
   const undoStack = [], redoStack = [];
-  const sources = []; // sources[k]: geometry edit k starts from (0: the model)
+  // The shapes edits start from, by the edits before them: what a click picks on after Next edit, undo and redo.
+  const sourceCache = new Map();
   let model = null, fullResolution = 128, modelName = 'model';
   let lastFullPly = null, lastReport = null;
 
@@ -28,25 +29,32 @@
   };
   window.voxwarp = api;
 
-  function snapshot() { return JSON.stringify({ state: state, sources: sources.length }); }
+  function snapshot() { return JSON.stringify({ state: state }); }
   function commit() { undoStack.push(lastSnapshot); lastSnapshot = snapshot(); redoStack.length = 0; }
   let lastSnapshot = snapshot();
   function restore(text) {
     const s = JSON.parse(text);
     state.lattice = s.state.lattice; state.edits = s.state.edits; state.current = s.state.current;
-    while (sources.length > s.sources) sources.pop();
     selected = -1;
     lastSnapshot = text;
     syncControls(); rebuildHandles(); showSource(); requestDeform(fullResolution);
   }
 
   // ---- The edit script in the edit-file schema. ----------------------------------------------------------------
-  function editObject(e) {
-    return {
-      solver: e.solver, preserve_volume: e.preserve_volume,
-      constraints: e.constraints.map(c => c.kind === 'pin' ? { pin: c.point } : { move: c.point, to: c.to }),
-    };
+  // Handles are moves and pins (with their weights); every other entry of a loaded file (control-point offsets,
+  // frames, regions, connects, normals, slides) is kept as it came and written back.
+  function constraintObject(c) {
+    if (c.kind === 'raw') return c.entry;
+    const out = c.kind === 'pin' ? { pin: c.point } : { move: c.point, to: c.to };
+    if (c.weight !== undefined) out.weight = c.weight;
+    return out;
   }
+  function editObject(e) {
+    return { solver: e.solver, preserve_volume: e.preserve_volume, constraints: e.constraints.map(constraintObject) };
+  }
+  function sourceKey(k) { return JSON.stringify(state.edits.slice(0, k).map(editObject)); }
+  function sourceOf(k) { return k === 0 ? model : sourceCache.get(sourceKey(k)); }
+  function isSource(g) { return g === model || Array.from(sourceCache.values()).indexOf(g) >= 0; }
   function script() {
     const edits = state.edits.map(editObject);
     if (state.current.constraints.length) edits.push(editObject(state.current));
@@ -57,9 +65,11 @@
   api.editJSON = function () { return JSON.stringify(script(), null, 2); };
 
   // ---- Scene objects. ---------------------------------------------------------------------------------------------
-  const sourceMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0x9aa0a8, { transparent: true, opacity: 0.28, depthWrite: false }));
+  // The shape the edit starts from (what a click picks on) and the result: one of the two is shown, the result
+  // unless Before is on (no translucent ghost over the result: the two surfaces coincide and would z-fight).
+  const sourceMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0x9aa0a8));
   const resultMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0xd99a5b));
-  resultMesh.renderOrder = 0; sourceMesh.renderOrder = 1;
+  let before = false;
   view.scene.add(resultMesh); view.scene.add(sourceMesh);
   const handles = new THREE.Group();
   view.scene.add(handles);
@@ -71,6 +81,7 @@
   function rebuildHandles() {
     while (handles.children.length) handles.remove(handles.children[0]);
     state.current.constraints.forEach(function (c, i) {
+      if (c.kind === 'raw') return; // kept, not shown
       const pick = i === selected ? 1.35 : 1;
       if (c.kind === 'pin') {
         const b = ball(i === selected ? 0x1d4ed8 : 0x3b82f6, handleRadius * pick);
@@ -88,11 +99,14 @@
     redraw();
   }
   function showSource() {
-    sourceMesh.geometry = sources[state.edits.length] || sources[0];
-    // The shape the edit starts from, as a ghost to pick on (not while dragging: half the triangles to draw).
-    sourceMesh.visible = !api.drag.active && (state.current.constraints.length > 0 || state.edits.length > 0);
+    sourceMesh.geometry = sourceOf(state.edits.length) || model;
+    sourceMesh.visible = before;
+    resultMesh.visible = !before;
+    document.getElementById('before').checked = before;
     redraw();
   }
+  api.visible = function () { return { source: sourceMesh.visible, result: resultMesh.visible }; };
+  api.sourceIsModel = function () { return sourceMesh.geometry === model; };
   function syncControls() {
     document.getElementById('solver').value = state.current.solver;
     document.getElementById('preserve-volume').checked = state.current.preserve_volume;
@@ -103,10 +117,10 @@
   // at once (the server cancels the preview it supersedes) and no queued preview is sent after it.
   let inFlight = false, pending = 0, issued = 0, lastFull = 0;
   function requestDeform(resolution) {
-    if (!script().edits.length) { resultMesh.geometry = sources[0]; showSource(); return Promise.resolve(); }
+    if (!script().edits.length) { resultMesh.geometry = model; showSource(); return Promise.resolve(true); }
     const full = resolution === fullResolution;
     if (full) { lastFull = ++issued; pending = 0; }
-    else if (inFlight) { pending = resolution; return Promise.resolve(); }
+    else if (inFlight) { pending = resolution; return Promise.resolve(true); }
     const id = full ? lastFull : ++issued;
     inFlight = inFlight || !full;
     api.requests++;
@@ -114,17 +128,17 @@
     const started = performance.now();
     return Viewer.api('/api/deform?resolution=' + resolution, { method: 'POST', body: body, headers: { 'Content-Type': 'application/json' } })
       .then(async function (response) {
-        if (response.status === 409) return; // superseded: a newer request is on its way
+        if (response.status === 409) return true; // superseded: a newer request is on its way
         if (!response.ok) {
           const e = await response.json().catch(() => ({ error: response.statusText }));
           showError(e.error);
-          return;
+          return false;
         }
         const buffer = await response.arrayBuffer();
-        if (id < lastFull || (full && body !== api.editJSON())) return; // a later full result is coming
+        if (id < lastFull || (full && body !== api.editJSON())) return true; // a later full result is coming
         const previous = resultMesh.geometry;
         resultMesh.geometry = Viewer.parsePly(buffer);
-        if (previous !== resultMesh.geometry && sources.indexOf(previous) < 0) previous.dispose();
+        if (previous !== resultMesh.geometry && !isSource(previous)) previous.dispose();
         redraw();
         lastReport = JSON.parse(response.headers.get('X-Voxwarp-Report') || '{}');
         if (full) lastFullPly = buffer;
@@ -132,8 +146,9 @@
         api.resultVersion++;
         if (api.drag.active) api.drag.updates++;
         showReport(lastReport, resolution, performance.now() - started);
+        return true;
       })
-      .catch(function (e) { showError(String(e)); })
+      .catch(function (e) { showError(String(e)); return false; })
       .finally(function () {
         if (full) return;
         inFlight = false;
@@ -174,6 +189,14 @@
     const r = canvas.getBoundingClientRect();
     return new THREE.Vector2(((event.clientX - r.left) / r.width) * 2 - 1, -((event.clientY - r.top) / r.height) * 2 + 1);
   }
+  /// The first hit of the raycaster's ray on the shape the edit starts from, shown or not (three.js skips hidden
+  /// objects in intersectObject, so the mesh is asked directly).
+  function pickSource() {
+    const hits = [];
+    sourceMesh.raycast(raycaster, hits);
+    hits.sort((a, b) => a.distance - b.distance);
+    return hits[0];
+  }
   let down = null, dragging = null;
   canvas.addEventListener('pointerdown', function (event) {
     if (event.button !== 0) return;
@@ -196,7 +219,7 @@
     const c = state.current.constraints[dragging.index];
     if (event.shiftKey) { // depth: along the view direction, a model-size fraction per pixel
       const dir = view.camera.getWorldDirection(new THREE.Vector3());
-      const size = sources[0].boundingSphere.radius;
+      const size = model.boundingSphere.radius;
       const to = new THREE.Vector3().fromArray(c.to).addScaledVector(dir, (event.clientY - dragging.y) * size / 200);
       c.to = to.toArray();
       dragging.plane.setFromNormalAndCoplanarPoint(dir, to);
@@ -232,7 +255,7 @@
     }
     down = null;
     raycaster.setFromCamera(ndc(event), view.camera);
-    const hit = raycaster.intersectObject(sourceMesh.visible ? sourceMesh : resultMesh)[0] || raycaster.intersectObject(resultMesh)[0];
+    const hit = pickSource();
     if (!hit) return;
     const point = hit.point.toArray();
     const tool = document.querySelector('input[name=tool]:checked').value;
@@ -257,18 +280,22 @@
   document.getElementById('redo').onclick = redo;
   document.getElementById('solver').onchange = function (e) { state.current.solver = e.target.value; commit(); requestDeform(fullResolution); };
   document.getElementById('preserve-volume').onchange = function (e) { state.current.preserve_volume = e.target.checked; commit(); requestDeform(fullResolution); };
+  function toggleBefore() { before = !before; showSource(); }
+  document.getElementById('before').onchange = toggleBefore;
   window.addEventListener('keydown', function (e) {
     if (e.target.tagName === 'SELECT' || e.target.tagName === 'INPUT') return;
     if (e.key === 'Delete' || e.key === 'Backspace') { remove(); e.preventDefault(); }
     else if ((e.ctrlKey || e.metaKey) && e.key === 'z' && !e.shiftKey) { undo(); e.preventDefault(); }
     else if ((e.ctrlKey || e.metaKey) && (e.key === 'y' || (e.key === 'z' && e.shiftKey))) { redo(); e.preventDefault(); }
+    else if (e.key === 'b' && !e.ctrlKey && !e.metaKey) { toggleBefore(); e.preventDefault(); }
   });
   document.getElementById('next-edit').onclick = async function () {
     if (!state.current.constraints.length) return;
     await requestDeform(fullResolution);
     if (!lastFullPly) return;
-    sources[state.edits.length + 1] = Viewer.parsePly(lastFullPly);
+    const result = Viewer.parsePly(lastFullPly);
     state.edits.push(state.current);
+    sourceCache.set(sourceKey(state.edits.length), result);
     state.current = { solver: state.current.solver, preserve_volume: state.current.preserve_volume, constraints: [] };
     selected = -1;
     commit(); syncControls(); rebuildHandles(); showSource();
@@ -284,34 +311,80 @@
   };
   document.getElementById('load-edit').onchange = async function (e) {
     const file = e.target.files[0];
-    if (file) await api.loadEdit(await file.text());
+    if (file) await api.loadEdit(await file.text(), file.name);
     e.target.value = '';
   };
 
+  /// A point of an edit file: an array of three finite numbers.
+  function isPoint(p) { return Array.isArray(p) && p.length === 3 && p.every(x => typeof x === 'number' && isFinite(x)); }
+  /// Why an edit file's structure cannot be the editor's state (the server checks the rest), or ''.
+  function malformed(data) {
+    if (!data || typeof data !== 'object' || !Array.isArray(data.edits) || !data.edits.length) return 'expected {"edits": [...]} with at least one edit';
+    for (let k = 0; k < data.edits.length; ++k) {
+      const e = data.edits[k], path = 'edits[' + k + ']';
+      if (!e || !Array.isArray(e.constraints) || !e.constraints.length) return path + '.constraints: expected a non-empty array';
+      for (let j = 0; j < e.constraints.length; ++j) {
+        const c = e.constraints[j], where = path + '.constraints[' + j + ']';
+        if (!c || typeof c !== 'object') return where + ': expected an object';
+        for (const key of ['move', 'to', 'pin'])
+          if (key in c && !isPoint(c[key])) return where + '.' + key + ': expected an array of three finite numbers';
+        if ('move' in c && !('to' in c)) return where + ': missing field "to"';
+      }
+    }
+    return '';
+  }
+  /// The model and every handle's point and target: what a loaded edit should show.
+  function reframe() {
+    const box = model.boundingBox.clone();
+    state.edits.concat([state.current]).forEach(e => e.constraints.forEach(function (c) {
+      if (c.point) box.expandByPoint(new THREE.Vector3().fromArray(c.point));
+      if (c.to) box.expandByPoint(new THREE.Vector3().fromArray(c.to));
+    }));
+    const centre = Viewer.frame(view, box, 30, 15, view.camera.aspect);
+    controls.target.copy(centre);
+    controls.update();
+    redraw();
+  }
+
   /// Take an edit file's text as the editor's state: its earlier edits' results are computed in turn, so that
-  /// the last edit's handles sit on the shape it starts from.
-  api.loadEdit = async function (text) {
+  /// the last edit's handles sit on the shape it starts from. A file that is malformed, or that the server
+  /// refuses, leaves the state as it was, and the message names the file.
+  api.loadEdit = async function (text, name) {
+    name = name || 'edit file';
     let data;
-    try { data = JSON.parse(text); } catch (e) { showError('edit file: not valid JSON: ' + e.message); return; }
-    if (!data || !Array.isArray(data.edits) || !data.edits.length) { showError('edit file: expected {"edits": [...]}'); return; }
-    const toEdit = e => ({
-      solver: e.solver || 'min-norm', preserve_volume: !!e.preserve_volume,
-      constraints: (e.constraints || []).filter(c => c.move || c.pin).map(c => c.pin ? { kind: 'pin', point: c.pin } : { kind: 'move', point: c.move, to: c.to }),
-    });
+    try { data = JSON.parse(text); } catch (e) { showError(name + ': not valid JSON: ' + e.message); return false; }
+    const why = malformed(data);
+    if (why) { showError(name + ': ' + why); return false; }
+    // A move or pin with nothing else than its fields becomes a handle; anything else goes to the server as it came.
+    const only = (c, keys) => Object.keys(c).every(k => keys.indexOf(k) >= 0);
+    const weight = c => ('weight' in c ? { weight: c.weight } : {});
+    const toConstraint = c => c.pin && only(c, ['pin', 'weight']) ? Object.assign({ kind: 'pin', point: c.pin }, weight(c))
+      : c.move && only(c, ['move', 'to', 'weight']) ? Object.assign({ kind: 'move', point: c.move, to: c.to }, weight(c))
+        : { kind: 'raw', entry: c };
+    const toEdit = e => ({ solver: e.solver || 'min-norm', preserve_volume: !!e.preserve_volume, constraints: e.constraints.map(toConstraint) });
+    const previous = lastSnapshot;
+    const fail = function () {
+      const message = api.errors[api.errors.length - 1] || 'refused';
+      restore(previous);
+      showError(message.replace(/^request: /, name + ': '));
+      return false;
+    };
     state.lattice = data.lattice || null;
-    state.edits = []; sources.length = 1;
+    state.edits = [];
     const all = data.edits.map(toEdit);
     for (let k = 0; k + 1 < all.length; ++k) { // the shape each later edit starts from
       state.current = all[k];
-      await requestDeform(fullResolution);
-      if (!lastFullPly) return;
-      sources[k + 1] = Viewer.parsePly(lastFullPly);
+      if (!(await requestDeform(fullResolution)) || !lastFullPly) return fail();
+      const result = Viewer.parsePly(lastFullPly);
       state.edits.push(all[k]);
+      sourceCache.set(sourceKey(state.edits.length), result);
     }
     state.current = all[all.length - 1];
     selected = -1;
-    commit(); syncControls(); rebuildHandles(); showSource();
-    await requestDeform(fullResolution);
+    syncControls(); rebuildHandles(); showSource(); reframe();
+    if (!(await requestDeform(fullResolution))) return fail();
+    commit();
+    return true;
   };
 
   // ---- Tests and scripts. ------------------------------------------------------------------------------------
@@ -325,7 +398,7 @@
   api.pick = function (x, y) {
     const r = canvas.getBoundingClientRect();
     raycaster.setFromCamera(new THREE.Vector2(x / r.width * 2 - 1, -(y / r.height) * 2 + 1), view.camera);
-    const hit = raycaster.intersectObject(sourceMesh.visible ? sourceMesh : resultMesh)[0];
+    const hit = pickSource();
     return hit ? hit.point.toArray() : null;
   };
   api.lastPlyBase64 = function () {
@@ -368,7 +441,6 @@
     modelName = facts.name || 'model';
     document.getElementById('model-name').textContent = modelName;
     model = Viewer.parsePly(await response.arrayBuffer());
-    sources[0] = model;
     resultMesh.geometry = model;
     handleRadius = model.boundingSphere.radius * 0.025;
     resize();

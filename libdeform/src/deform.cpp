@@ -148,9 +148,11 @@ std::function<std::vector<Eigen::Vector3d>(const RegionShape&)> material_of(cons
     };
 }
 
-/// Refuse constraint points far from the model: the data box grown by far_fraction of its size.
+/// Refuse constraint points far from the model: the data box grown by far_fraction of its size; and targets more
+/// than the model's size (its longest side) outside it, which would stretch it past anything the lattice spans.
 void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double fraction) {
     const Eigen::Vector3d margin = fraction * (hi - lo);
+    const double reach = (hi - lo).maxCoeff();
     for (const auto& c : constraints) {
         if (c.kind == ConstraintKind::control_point || c.kind == ConstraintKind::region) continue; // a region's points are the model's
         for (const Eigen::Vector3d& p : {c.point, c.kind == ConstraintKind::join ? c.to : c.point})
@@ -158,6 +160,11 @@ void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3
                 throw InvalidInput(c.name + ": point (" + std::to_string(p.x()) + ", " + std::to_string(p.y()) + ", " + std::to_string(p.z()) +
                                    ") lies far outside the model (bounds " + std::to_string(lo.x()) + ".." + std::to_string(hi.x()) + ", " +
                                    std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " + std::to_string(lo.z()) + ".." + std::to_string(hi.z()) + ")");
+        if (c.kind == ConstraintKind::move && ((c.to.array() < lo.array() - reach).any() || (c.to.array() > hi.array() + reach).any()))
+            throw InvalidInput(c.name + ".to: target (" + std::to_string(c.to.x()) + ", " + std::to_string(c.to.y()) + ", " + std::to_string(c.to.z()) +
+                               ") lies more than the model's size (" + std::to_string(reach) + ") outside its bounds (" + std::to_string(lo.x()) + ".." +
+                               std::to_string(hi.x()) + ", " + std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " + std::to_string(lo.z()) + ".." +
+                               std::to_string(hi.z()) + ")");
     }
 }
 
