@@ -30,22 +30,53 @@
   window.voxwarp = api;
 
   function snapshot() { return JSON.stringify({ state: state }); }
-  function commit() { undoStack.push(lastSnapshot); lastSnapshot = snapshot(); redoStack.length = 0; }
+  function commit() { undoStack.push(lastSnapshot); lastSnapshot = snapshot(); redoStack.length = 0; save(); }
+  /// The work so far, kept in the browser for this model: a reload of the page takes it up again.
+  let storageKey = null;
+  function save() {
+    if (!storageKey) return;
+    try {
+      if (script().edits.length) localStorage.setItem(storageKey, api.editJSON());
+      else localStorage.removeItem(storageKey);
+    } catch (e) { /* storage full or off: the work is only lost on a reload */ }
+  }
   let lastSnapshot = snapshot();
   function restore(text) {
     const s = JSON.parse(text);
     state.lattice = s.state.lattice; state.edits = s.state.edits; state.current = s.state.current;
     selected = -1;
     lastSnapshot = text;
-    syncControls(); rebuildHandles(); showSource(); requestDeform(fullResolution);
+    syncControls(); rebuildHandles(); showSource();
+    return requestDeform(fullResolution);
   }
 
   // ---- The edit script in the edit-file schema. ----------------------------------------------------------------
   // Handles are moves and pins (with their weights); every other entry of a loaded file (control-point offsets,
   // frames, regions, connects, normals, slides) is kept as it came and written back.
+  /// A frame's turn {axis, degrees} from its quaternion [x, y, z, w]; null when it does not turn.
+  function rotateOf(q) {
+    const quaternion = new THREE.Quaternion().fromArray(q).normalize();
+    const angle = 2 * Math.acos(Math.min(1, Math.abs(quaternion.w)));
+    if (angle < 1e-9) return null;
+    const s = Math.sqrt(1 - quaternion.w * quaternion.w) * Math.sign(quaternion.w || 1);
+    return { axis: [quaternion.x / s, quaternion.y / s, quaternion.z / s], degrees: angle * 180 / Math.PI };
+  }
+  function quaternionOf(rotate) {
+    if (!rotate) return [0, 0, 0, 1];
+    const axis = new THREE.Vector3().fromArray(rotate.axis).normalize();
+    return new THREE.Quaternion().setFromAxisAngle(axis, rotate.degrees * Math.PI / 180).toArray();
+  }
   function constraintObject(c) {
     if (c.kind === 'raw') return c.entry;
-    const out = c.kind === 'pin' ? { pin: c.point } : { move: c.point, to: c.to };
+    if (c.entry && JSON.stringify([c.point, c.to, c.turn]) === c.pristine) return c.entry; // a loaded frame as it came
+    let out;
+    if (c.kind === 'frame') {
+      out = { frame: c.point, to: c.to };
+      const rotate = rotateOf(c.turn);
+      if (rotate) out.rotate = rotate;
+    } else {
+      out = c.kind === 'pin' ? { pin: c.point } : { move: c.point, to: c.to };
+    }
     if (c.weight !== undefined) out.weight = c.weight;
     return out;
   }
@@ -79,6 +110,7 @@
     return new THREE.Mesh(new THREE.SphereBufferGeometry(radius, 16, 12), new THREE.MeshStandardMaterial({ color: colour, roughness: 0.4 }));
   }
   function rebuildHandles() {
+    showSelected();
     while (handles.children.length) handles.remove(handles.children[0]);
     state.current.constraints.forEach(function (c, i) {
       if (c.kind === 'raw') return; // kept, not shown
@@ -95,6 +127,12 @@
       to.position.fromArray(c.to); to.userData = { index: i, role: 'target' };
       const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints([from.position, to.position]), new THREE.LineBasicMaterial({ color: 0x444444 }));
       handles.add(from); handles.add(to); handles.add(line);
+      if (c.kind === 'frame') { // its axes, turned as the frame turns the map there
+        const axes = new THREE.AxesHelper(handleRadius * 4);
+        axes.position.fromArray(c.to);
+        axes.quaternion.fromArray(c.turn);
+        handles.add(axes);
+      }
     });
     redraw();
   }
@@ -142,6 +180,7 @@
         redraw();
         lastReport = JSON.parse(response.headers.get('X-Voxwarp-Report') || '{}');
         if (full) lastFullPly = buffer;
+        api.shownEdit = body;
         api.lastResolution = resolution;
         api.resultVersion++;
         if (api.drag.active) api.drag.updates++;
@@ -259,12 +298,79 @@
     if (!hit) return;
     const point = hit.point.toArray();
     const tool = document.querySelector('input[name=tool]:checked').value;
-    state.current.constraints.push(tool === 'pin' ? { kind: 'pin', point: point } : { kind: 'move', point: point, to: point.slice() });
+    state.current.constraints.push(tool === 'pin' ? { kind: 'pin', point: point }
+      : tool === 'frame' ? { kind: 'frame', point: point, to: point.slice(), turn: [0, 0, 0, 1] } : { kind: 'move', point: point, to: point.slice() });
     selected = state.current.constraints.length - 1;
     commit();
     showSource(); rebuildHandles();
     requestDeform(fullResolution);
   });
+
+  // ---- The selected handle in numbers: its point, target and (a frame's) turn as Euler angles in degrees. ------
+  const numbers = { point: document.getElementById('sel-point'), to: document.getElementById('sel-to'), turn: document.getElementById('sel-turn') };
+  const format = a => a.map(x => +x.toFixed(6)).join(', ');
+  function showSelected() {
+    const c = state.current.constraints[selected];
+    const shown = c && c.kind !== 'raw';
+    document.getElementById('selected').style.display = shown ? '' : 'none';
+    if (!shown) return;
+    numbers.point.value = format(c.point);
+    numbers.to.value = c.to ? format(c.to) : '';
+    numbers.to.disabled = c.kind === 'pin';
+    const e = new THREE.Euler().setFromQuaternion(new THREE.Quaternion().fromArray(c.turn || [0, 0, 0, 1]), 'XYZ');
+    numbers.turn.value = format([e.x, e.y, e.z].map(r => r * 180 / Math.PI));
+    numbers.turn.disabled = c.kind !== 'frame';
+  }
+  function parseTriple(text) {
+    const v = text.split(/[\s,]+/).filter(x => x.length).map(Number);
+    return v.length === 3 && v.every(isFinite) ? v : null;
+  }
+  function typed(field) {
+    return function () {
+      const c = state.current.constraints[selected];
+      if (!c || !numbers[field].value.trim()) return; // emptied: nothing typed yet
+      const v = parseTriple(numbers[field].value);
+      if (!v) { showError('expected three numbers, e.g. 1, 0.5, -2'); showSelected(); return; }
+      if (field === 'turn') c.turn = new THREE.Quaternion().setFromEuler(new THREE.Euler(...v.map(d => d * Math.PI / 180), 'XYZ')).toArray();
+      else if (field === 'to') c.to = v;
+      else { c.point = v; if (c.kind === 'pin') c.to = v.slice(); }
+      commit(); rebuildHandles(); requestDeform(fullResolution);
+    };
+  }
+  for (const field of ['point', 'to', 'turn']) numbers[field].onchange = typed(field);
+  api.select = function (i) { selected = i; rebuildHandles(); };
+
+  // ---- Views: front, side, top; the whole model and its handles, or the selected handle. ----------------------
+  function viewBox(onlySelected) {
+    const box = new THREE.Box3();
+    const c = state.current.constraints[selected];
+    if (onlySelected && c && c.kind !== 'raw') {
+      box.expandByPoint(new THREE.Vector3().fromArray(c.point));
+      if (c.to) box.expandByPoint(new THREE.Vector3().fromArray(c.to));
+      box.expandByScalar(model.boundingSphere.radius * 0.15);
+      return box;
+    }
+    box.copy(model.boundingBox);
+    state.edits.concat([state.current]).forEach(e => e.constraints.forEach(function (k) {
+      if (k.point) box.expandByPoint(new THREE.Vector3().fromArray(k.point));
+      if (k.to) box.expandByPoint(new THREE.Vector3().fromArray(k.to));
+    }));
+    return box;
+  }
+  let viewAngles = [30, 15];
+  function look(azimuth, elevation, onlySelected) {
+    viewAngles = [azimuth, elevation];
+    const centre = Viewer.frame(view, viewBox(onlySelected), azimuth, elevation, view.camera.aspect);
+    controls.target.copy(centre);
+    controls.update();
+    redraw();
+  }
+  document.getElementById('view-front').onclick = () => look(0, 0);
+  document.getElementById('view-side').onclick = () => look(90, 0);
+  document.getElementById('view-top').onclick = () => look(0, 89.9);
+  document.getElementById('view-all').onclick = () => look(viewAngles[0], viewAngles[1]);
+  document.getElementById('view-selected').onclick = () => look(viewAngles[0], viewAngles[1], true);
+  api.cameraDirection = () => view.camera.getWorldDirection(new THREE.Vector3()).toArray();
 
   // ---- Buttons and keys. -------------------------------------------------------------------------------------
   function remove() {
@@ -326,7 +432,7 @@
       for (let j = 0; j < e.constraints.length; ++j) {
         const c = e.constraints[j], where = path + '.constraints[' + j + ']';
         if (!c || typeof c !== 'object') return where + ': expected an object';
-        for (const key of ['move', 'to', 'pin'])
+        for (const key of ['move', 'to', 'pin', 'frame'])
           if (key in c && !isPoint(c[key])) return where + '.' + key + ': expected an array of three finite numbers';
         if ('move' in c && !('to' in c)) return where + ': missing field "to"';
       }
@@ -334,17 +440,7 @@
     return '';
   }
   /// The model and every handle's point and target: what a loaded edit should show.
-  function reframe() {
-    const box = model.boundingBox.clone();
-    state.edits.concat([state.current]).forEach(e => e.constraints.forEach(function (c) {
-      if (c.point) box.expandByPoint(new THREE.Vector3().fromArray(c.point));
-      if (c.to) box.expandByPoint(new THREE.Vector3().fromArray(c.to));
-    }));
-    const centre = Viewer.frame(view, box, 30, 15, view.camera.aspect);
-    controls.target.copy(centre);
-    controls.update();
-    redraw();
-  }
+  function reframe() { look(viewAngles[0], viewAngles[1]); }
 
   /// Take an edit file's text as the editor's state: its earlier edits' results are computed in turn, so that
   /// the last edit's handles sit on the shape it starts from. A file that is malformed, or that the server
@@ -360,12 +456,19 @@
     const weight = c => ('weight' in c ? { weight: c.weight } : {});
     const toConstraint = c => c.pin && only(c, ['pin', 'weight']) ? Object.assign({ kind: 'pin', point: c.pin }, weight(c))
       : c.move && only(c, ['move', 'to', 'weight']) ? Object.assign({ kind: 'move', point: c.move, to: c.to }, weight(c))
-        : { kind: 'raw', entry: c };
+        : c.frame && isPoint(c.frame) && only(c, ['frame', 'to', 'rotate', 'weight']) && (!c.rotate || (isPoint(c.rotate.axis) && isFinite(c.rotate.degrees)))
+          ? loadedFrame(Object.assign({ kind: 'frame', point: c.frame, to: c.to || c.frame.slice(), turn: quaternionOf(c.rotate) }, weight(c)), c)
+          : { kind: 'raw', entry: c };
+    const loadedFrame = function (handle, entry) {
+      handle.entry = entry;
+      handle.pristine = JSON.stringify([handle.point, handle.to, handle.turn]);
+      return handle;
+    };
     const toEdit = e => ({ solver: e.solver || 'min-norm', preserve_volume: !!e.preserve_volume, constraints: e.constraints.map(toConstraint) });
     const previous = lastSnapshot;
-    const fail = function () {
+    const fail = async function () { // the page as it was, then the message (after the result it shows again)
       const message = api.errors[api.errors.length - 1] || 'refused';
-      restore(previous);
+      await restore(previous);
       showError(message.replace(/^request: /, name + ': '));
       return false;
     };
@@ -390,6 +493,7 @@
   // ---- Tests and scripts. ------------------------------------------------------------------------------------
   /// Canvas pixel (relative to the canvas' top-left) of a world point.
   api.screenOf = function (p) {
+    view.camera.updateMatrixWorld(); // a view just set is drawn only at the next frame
     const v = new THREE.Vector3().fromArray(p).project(view.camera);
     const r = canvas.getBoundingClientRect();
     return [(v.x + 1) / 2 * r.width, (1 - v.y) / 2 * r.height];
@@ -450,8 +554,11 @@
     syncControls(); showSource();
     status.textContent = modelName + ': ' + facts.vertices + ' vertices, ' + facts.faces + ' faces; full result at resolution ' + fullResolution;
     frame();
+    storageKey = 'voxwarp edit: ' + modelName + ' ' + facts.vertices + ' ' + facts.faces;
     const initial = await Viewer.api('/api/edit');
-    if (initial.status === 200) await api.loadEdit(await initial.text());
+    const saved = (function () { try { return localStorage.getItem(storageKey); } catch (e) { return null; } })();
+    if (initial.status === 200) await api.loadEdit(await initial.text(), 'the edit file given to voxwarp edit');
+    else if (saved) await api.loadEdit(saved, 'the work saved in this browser');
     api.ready = true;
   })().catch(e => showError('loading the model failed: ' + e));
 })();

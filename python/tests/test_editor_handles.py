@@ -1,0 +1,98 @@
+# The editor's handles that turn, in headless Chromium: a frame handle placed by clicks and set by typed numbers
+# (five UI actions for the box's 90-degree bend, counted), the edit it saves giving the CLI's bytes; the view
+# presets; and the work surviving a reload of the page.
+import base64
+import json
+import math
+
+from selenium.webdriver.common.action_chains import ActionChains
+
+from conftest import data, run_cli
+from test_editor import wait
+from test_editor_bugs import box_page  # noqa: F401  (the fixture)
+
+
+class Actions:
+    """UI actions as a user makes them, counted: clicks on the canvas and the panel, typed fields."""
+
+    def __init__(self, driver):
+        self.driver, self.count = driver, 0
+        self.canvas = driver.find_element("id", "view")
+
+    def click_model(self, point):
+        x, y = self.driver.execute_script("return window.voxwarp.screenOf(arguments[0])", point)
+        w, h = self.canvas.size["width"], self.canvas.size["height"]
+        ActionChains(self.driver).move_to_element_with_offset(self.canvas, int(x - w / 2), int(y - h / 2)).click().perform()
+        self.count += 1
+
+    def click(self, css):
+        self.driver.find_element("css selector", css).click()
+        self.count += 1
+
+    def type(self, element_id, text):
+        field = self.driver.find_element("id", element_id)
+        field.clear()
+        field.send_keys(text + "\n")
+        self.count += 1
+
+
+def test_a_frame_bend_in_five_actions_saves_what_the_cli_deforms(box_page, tmp_path):  # noqa: F811
+    driver, _ = box_page
+    act = Actions(driver)
+    act.click("input[value=frame]")
+    act.click_model([-2.0, 0.0, 0.3])  # the left end's face: its frame held
+    act.click_model([2.0, 0.0, 0.3])   # the right end's face
+    wait(driver, "window.voxwarp.state.current.constraints.length === 2")
+    act.type("sel-to", "0.546479, 2.546479, 0.3")
+    act.type("sel-turn", "0, 0, 90")
+    print("\nbox bent by two frame handles in %d UI actions" % act.count)
+    assert act.count <= 5
+    wait(driver, "window.voxwarp.state.current.constraints[1].to[1] > 2.5")
+    edit = json.loads(driver.execute_script("return window.voxwarp.editJSON()"))
+    frames = edit["edits"][0]["constraints"]
+    assert [next(iter(c)) for c in frames] == ["frame", "frame"]
+    assert frames[0]["frame"][0] < -1.5 and "rotate" not in frames[0]  # on the box near its ends: what the view shows of them
+    assert frames[1]["frame"][0] > 1.5 and frames[1]["to"] == [0.546479, 2.546479, 0.3]
+    rotate = frames[1]["rotate"]
+    assert abs(rotate["degrees"] - 90) < 1e-6 and abs(abs(rotate["axis"][2]) - 1) < 1e-9, rotate
+    # The result shown is the CLI's deform of the saved edit, byte for byte.
+    wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON() && window.voxwarp.lastResolution === 48")  # the turned frame's result
+    shown = base64.b64decode(wait(driver, "window.voxwarp.lastPlyBase64()"))
+    (tmp_path / "edit.json").write_text(json.dumps(edit))
+    r = run_cli("deform", data("box.obj"), tmp_path / "edit.json", "-o", tmp_path / "cli.ply", "-r", 48, "-q")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "cli.ply").read_bytes() == shown
+
+
+def test_view_presets_look_along_the_axes(box_page):  # noqa: F811
+    driver, _ = box_page
+    for button, direction in (("view-front", [0, 0, -1]), ("view-side", [-1, 0, 0]), ("view-top", [0, -1, 0])):
+        driver.find_element("id", button).click()
+        d = driver.execute_script("return window.voxwarp.cameraDirection()")
+        assert sum(a * b for a, b in zip(d, direction)) > 0.999, (button, d)
+    # Frame selected: the selected handle fills more of the view than with the whole model framed.
+    Actions(driver).click("input[value=pin]")
+    Actions(driver).click_model([2.0, 0.0, 0.3])
+    wait(driver, "window.voxwarp.state.current.constraints.length === 1")
+    driver.execute_script("window.voxwarp.select(0)")
+    span = ("const a = window.voxwarp.screenOf([1.8, 0, 0.3]), b = window.voxwarp.screenOf([2.2, 0, 0.3]);"
+            "return Math.hypot(a[0] - b[0], a[1] - b[1])")  # pixels across 0.4 along x, seen from the top
+    driver.find_element("id", "view-all").click()
+    far = driver.execute_script(span)
+    driver.find_element("id", "view-selected").click()
+    near = driver.execute_script(span)
+    assert near > 2 * far > 0, (near, far)
+
+
+def test_the_work_survives_a_reload_of_the_page(box_page):  # noqa: F811
+    driver, _ = box_page
+    act = Actions(driver)
+    act.click("input[value=pin]")
+    act.click_model([2.0, 0.0, 0.3])
+    wait(driver, "window.voxwarp.state.current.constraints.length === 1")
+    before = driver.execute_script("return window.voxwarp.editJSON()")
+    driver.refresh()
+    wait(driver, "window.voxwarp && window.voxwarp.ready")
+    assert driver.execute_script("return window.voxwarp.editJSON()") == before
+    point = driver.execute_script("return window.voxwarp.state.current.constraints[0].point")
+    assert math.isclose(point[0], 2.0, abs_tol=0.05), point
