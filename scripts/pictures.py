@@ -95,6 +95,14 @@ for name, edit, mapping, view in (("box_bend", "box_bend.json", bend, "20,25"), 
     voxwarp.write_mesh(exact, *exact_box(mapping))
     render(name + ".png", [minimum, rigid, exact], ["min-norm", "rigid", "exact"], view=view, size="1500x500")
 
+# The same bend by two frame handles (data/box_frames.json), and the ten points, beside the exact arc; the ear turned
+# by a region.
+exact = os.path.join(work, "box_bend_exact.ply")
+render("box_frames.png", [deform("box.obj", "box_frames.json", "frames"), deform("box.obj", "box_bend.json", "points"), exact],
+       ["two frames", "ten points", "exact"], view="20,25", size="1500x500")
+render("bunny_ear_turn.png", [os.path.join(data, "bunny.obj"), deform("bunny.obj", "bunny_ear_turn.json", "ear_turn")], ["bunny.obj", "bunny_ear_turn.json"],
+       view="80,10", size="1000x500")
+
 render("bunny_ear.png", [os.path.join(data, "bunny.obj"), deform("bunny.obj", "bunny_ear.json", "ear")], ["bunny.obj", "bunny_ear.json"], size="1000x500")
 render("bar_bend.png", [os.path.join(data, "bar.obj"), deform("bar.obj", "bar_bend.json", "bar", "-r", "96")], ["bar.obj", "bar_bend.json"], view="10,25", size="1000x400")
 render("snowden_nose.png", [os.path.join(data, "snowden_lo.obj"), deform("snowden_lo.obj", "snowden_nose.json", "nose", "-r", "192")],
