@@ -38,6 +38,7 @@ VOXWARP_EMBED(voxwarp_web_render, VOXWARP_WEB_DIR "/render.html")
 VOXWARP_EMBED(voxwarp_web_style, VOXWARP_WEB_DIR "/style.css")
 VOXWARP_EMBED(voxwarp_three, VOXWARP_THREE_JS)
 VOXWARP_EMBED(voxwarp_orbit, VOXWARP_ORBIT_CONTROLS_JS)
+VOXWARP_EMBED(voxwarp_transform, VOXWARP_TRANSFORM_CONTROLS_JS)
 
 namespace voxwarp::cli {
 
@@ -56,6 +57,7 @@ std::optional<Asset> find_asset(const std::string& path) {
         {"/style.css", voxwarp_web_style_begin, voxwarp_web_style_end, "text/css; charset=utf-8"},
         {"/three.min.js", voxwarp_three_begin, voxwarp_three_end, "text/javascript; charset=utf-8"},
         {"/OrbitControls.js", voxwarp_orbit_begin, voxwarp_orbit_end, "text/javascript; charset=utf-8"},
+        {"/TransformControls.js", voxwarp_transform_begin, voxwarp_transform_end, "text/javascript; charset=utf-8"},
     };
     for (const auto& e : entries)
         if (path == e.path) return Asset{std::string_view(e.begin, std::size_t(e.end - e.begin)), e.type};

@@ -111,6 +111,7 @@
   }
   function rebuildHandles() {
     showSelected();
+    if (!(gizmo && gizmo.dragging)) attachGizmo();
     while (handles.children.length) handles.remove(handles.children[0]);
     state.current.constraints.forEach(function (c, i) {
       if (c.kind === 'raw') return; // kept, not shown
@@ -238,7 +239,8 @@
   }
   let down = null, dragging = null;
   canvas.addEventListener('pointerdown', function (event) {
-    if (event.button !== 0) return;
+    gizmoDragged = false;
+    if (event.button !== 0 || gizmo.axis) return; // on the gizmo: it takes the drag
     raycaster.setFromCamera(ndc(event), view.camera);
     const hit = raycaster.intersectObjects(handles.children.filter(h => h.isMesh))[0];
     down = { x: event.clientX, y: event.clientY, hit: hit };
@@ -274,6 +276,7 @@
     requestDeform(Math.max(16, Math.round(fullResolution / 2)));
   });
   canvas.addEventListener('pointerup', function (event) {
+    if (gizmoDragged || gizmo.dragging) { down = null; return; }
     if (dragging) {
       const moved = dragging.moved;
       dragging = null;
@@ -305,6 +308,85 @@
     showSource(); rebuildHandles();
     requestDeform(fullResolution);
   });
+
+  // ---- The gizmo on the selected handle's target: move it along an axis or a plane, turn a frame about an axis
+  // (three.js TransformControls, from libjs-three), turns snapped to 15 degrees unless Snap is off. --------------
+  const gizmoTarget = new THREE.Object3D();
+  view.scene.add(gizmoTarget);
+  const gizmo = new THREE.TransformControls(view.camera, canvas);
+  gizmo.setSpace('world');
+  gizmo.setRotationSnap(Math.PI / 12);
+  view.scene.add(gizmo);
+  let gizmoDragged = false;
+  gizmo.addEventListener('change', redraw);
+  gizmo.addEventListener('dragging-changed', function (event) {
+    controls.enabled = !event.value;
+    if (event.value) {
+      gizmoDragged = true;
+      api.drag = { active: true, updates: 0, start: performance.now(), seconds: 0 };
+      return;
+    }
+    api.drag.active = false;
+    api.drag.seconds = (performance.now() - api.drag.start) / 1000;
+    commit(); rebuildHandles(); showSource(); requestDeform(fullResolution);
+  });
+  gizmo.addEventListener('objectChange', function () {
+    const c = state.current.constraints[selected];
+    if (!c || !c.to) return;
+    c.to = gizmoTarget.position.toArray();
+    if (c.kind === 'frame') c.turn = gizmoTarget.quaternion.toArray();
+    rebuildHandles();
+    requestDeform(Math.max(16, Math.round(fullResolution / 2)));
+  });
+  function attachGizmo() {
+    const c = state.current.constraints[selected];
+    if (!c || !c.to || c.kind === 'raw') { gizmo.detach(); return; }
+    if (gizmo.getMode() === 'rotate' && c.kind !== 'frame') gizmo.setMode('translate');
+    gizmoTarget.position.fromArray(c.to);
+    gizmoTarget.quaternion.fromArray(c.turn || [0, 0, 0, 1]);
+    gizmoTarget.updateMatrixWorld();
+    gizmo.attach(gizmoTarget);
+  }
+  function gizmoMode(mode) {
+    const c = state.current.constraints[selected];
+    gizmo.setMode(mode === 'rotate' && !(c && c.kind === 'frame') ? 'translate' : mode);
+    redraw();
+  }
+  document.getElementById('gizmo-move').onclick = () => gizmoMode('translate');
+  document.getElementById('gizmo-turn').onclick = () => gizmoMode('rotate');
+  document.getElementById('gizmo-snap').onchange = e => gizmo.setRotationSnap(e.target.checked ? Math.PI / 12 : null);
+  /// For scripts and the browser test: the gizmo's state, and the canvas pixels a turn of `degrees` about the
+  /// world axis drags between (TransformControls turns by the drag's length across the axis, 20 / distance
+  /// radians per world unit of the pointer on the gizmo's plane).
+  api.gizmo = () => ({ attached: !!gizmo.object, mode: gizmo.getMode() });
+  api.gizmoTurnDrag = function (axis, degrees) {
+    view.camera.updateMatrixWorld();
+    gizmo.updateMatrixWorld();
+    const centre = gizmoTarget.getWorldPosition(new THREE.Vector3());
+    const camera = view.camera.position.clone(), distance = centre.distanceTo(camera);
+    const eye = camera.clone().sub(centre).normalize();
+    const a = new THREE.Vector3().fromArray(axis).normalize();
+    const name = ['X', 'Y', 'Z'][[0, 1, 2].reduce((best, i) => (Math.abs(axis[i]) > Math.abs(axis[best]) ? i : best), 0)];
+    // A point of the axis' ring where the gizmo itself says the pointer is on that axis (its hover test).
+    const radius = distance * gizmo.size / 7; // TransformControlsGizmo: eye distance x size / 7
+    const u = new THREE.Vector3(1, 0, 0).cross(a).lengthSq() > 1e-6 ? new THREE.Vector3(1, 0, 0).cross(a).normalize() : new THREE.Vector3(0, 1, 0).cross(a).normalize();
+    const v = a.clone().cross(u);
+    const r = canvas.getBoundingClientRect();
+    let start = null;
+    for (let k = 0; k < 72 && !start; ++k) {
+      const t = k * Math.PI / 36;
+      const p = centre.clone().addScaledVector(u, radius * Math.cos(t)).addScaledVector(v, radius * Math.sin(t));
+      const [x, y] = api.screenOf(p.toArray());
+      canvas.dispatchEvent(new MouseEvent('mousemove', { clientX: r.left + x, clientY: r.top + y, bubbles: true }));
+      if (gizmo.axis === name) start = p;
+    }
+    if (!start) return null;
+    // The pointer's way on the plane facing the camera through the gizmo (the one TransformControls measures on).
+    const onPlane = start.clone().sub(camera).multiplyScalar(centre.clone().sub(camera).dot(eye) / start.clone().sub(camera).dot(eye)).add(camera);
+    const across = a.clone().cross(eye).normalize();
+    const end = onPlane.clone().addScaledVector(across, degrees * Math.PI / 180 * distance / 20);
+    return [api.screenOf(start.toArray()), api.screenOf(end.toArray())];
+  };
 
   // ---- The selected handle in numbers: its point, target and (a frame's) turn as Euler angles in degrees. ------
   const numbers = { point: document.getElementById('sel-point'), to: document.getElementById('sel-to'), turn: document.getElementById('sel-turn') };
@@ -394,6 +476,8 @@
     else if ((e.ctrlKey || e.metaKey) && e.key === 'z' && !e.shiftKey) { undo(); e.preventDefault(); }
     else if ((e.ctrlKey || e.metaKey) && (e.key === 'y' || (e.key === 'z' && e.shiftKey))) { redo(); e.preventDefault(); }
     else if (e.key === 'b' && !e.ctrlKey && !e.metaKey) { toggleBefore(); e.preventDefault(); }
+    else if (e.key === 'g' && !e.ctrlKey && !e.metaKey) { gizmoMode('translate'); e.preventDefault(); }
+    else if (e.key === 'r' && !e.ctrlKey && !e.metaKey) { gizmoMode('rotate'); e.preventDefault(); }
   });
   document.getElementById('next-edit').onclick = async function () {
     if (!state.current.constraints.length) return;

@@ -96,3 +96,38 @@ def test_the_work_survives_a_reload_of_the_page(box_page):  # noqa: F811
     assert driver.execute_script("return window.voxwarp.editJSON()") == before
     point = driver.execute_script("return window.voxwarp.state.current.constraints[0].point")
     assert math.isclose(point[0], 2.0, abs_tol=0.05), point
+
+
+def test_the_gizmo_turns_a_frame_handle_by_snapped_steps(box_page):  # noqa: F811
+    driver, _ = box_page
+    act = Actions(driver)
+    act.click("input[value=frame]")
+    act.click_model([-2.0, 0.0, 0.3])
+    act.click_model([2.0, 0.0, 0.3])
+    wait(driver, "window.voxwarp.state.current.constraints.length === 2")
+    assert driver.execute_script("return window.voxwarp.gizmo()") == {"attached": True, "mode": "translate"}
+    act.type("sel-to", "0.546479, 2.546479, 0.3")
+    act.click("#gizmo-turn")
+    assert driver.execute_script("return window.voxwarp.gizmo()")["mode"] == "rotate"
+    # One drag across the z ring, a little past 90 degrees: the snap makes it 90.
+    (x0, y0), (x1, y1) = driver.execute_script("return window.voxwarp.gizmoTurnDrag([0, 0, 1], 94)")
+    driver.execute_script(
+        """
+        const [x0, y0, x1, y1] = arguments;
+        const canvas = document.getElementById('view'), r = canvas.getBoundingClientRect();
+        const at = (x, y) => ({clientX: r.left + x, clientY: r.top + y, button: 0, bubbles: true});
+        canvas.dispatchEvent(new MouseEvent('mousemove', at(x0, y0)));
+        canvas.dispatchEvent(new PointerEvent('pointerdown', Object.assign(at(x0, y0), {pointerId: 9})));
+        canvas.dispatchEvent(new MouseEvent('mousedown', at(x0, y0)));
+        for (let i = 1; i <= 10; ++i) document.dispatchEvent(new MouseEvent('mousemove', at(x0 + (x1 - x0) * i / 10, y0 + (y1 - y0) * i / 10)));
+        document.dispatchEvent(new MouseEvent('mouseup', at(x1, y1)));
+        canvas.dispatchEvent(new PointerEvent('pointerup', Object.assign(at(x1, y1), {pointerId: 9})));
+        """, x0, y0, x1, y1)
+    act.count += 1
+    print("\nbox bent by two frame handles with the gizmo in %d UI actions" % act.count)
+    frames = json.loads(driver.execute_script("return window.voxwarp.editJSON()"))["edits"][0]["constraints"]
+    assert len(frames) == 2, frames  # the drag added nothing
+    rotate = frames[1].get("rotate")
+    assert rotate and abs(rotate["degrees"] - 90) < 1e-6 and abs(abs(rotate["axis"][2]) - 1) < 1e-9, frames[1]
+    assert frames[1]["to"] == [0.546479, 2.546479, 0.3]
+    wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON() && window.voxwarp.lastResolution === 48")
