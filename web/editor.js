@@ -111,7 +111,8 @@
   }
   function rebuildHandles() {
     showSelected();
-    if (!(gizmo && gizmo.dragging)) attachGizmo();
+    if (dragging) gizmo.detach(); // a target dragged by itself: the gizmo (costly to draw in software) comes back after
+    else if (!gizmo.dragging) attachGizmo();
     while (handles.children.length) handles.remove(handles.children[0]);
     state.current.constraints.forEach(function (c, i) {
       if (c.kind === 'raw') return; // kept, not shown
