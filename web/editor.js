@@ -74,6 +74,11 @@
       out = { frame: c.point, to: c.to };
       const rotate = rotateOf(c.turn);
       if (rotate) out.rotate = rotate;
+    } else if (c.kind === 'region') { // the sphere's motion: about its centre, then to its target
+      out = { region: { sphere: [c.point, c.radius] } };
+      if (c.to.some((x, i) => x !== c.point[i])) out.translate = c.to.map((x, i) => x - c.point[i]);
+      const rotate = rotateOf(c.turn);
+      if (rotate) out.rotate = Object.assign(rotate, { pivot: c.point });
     } else {
       out = c.kind === 'pin' ? { pin: c.point } : { move: c.point, to: c.to };
     }
@@ -129,6 +134,14 @@
       to.position.fromArray(c.to); to.userData = { index: i, role: 'target' };
       const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints([from.position, to.position]), new THREE.LineBasicMaterial({ color: 0x444444 }));
       handles.add(from); handles.add(to); handles.add(line);
+      if (c.kind === 'region') { // the sphere where it goes, turned as it turns
+        const sphere = new THREE.Mesh(new THREE.SphereBufferGeometry(c.radius, 24, 16),
+          new THREE.MeshBasicMaterial({ color: i === selected ? 0x7c3aed : 0xa78bfa, wireframe: true, transparent: true, opacity: 0.5 }));
+        sphere.position.fromArray(c.to);
+        sphere.quaternion.fromArray(c.turn);
+        sphere.userData = { index: i, role: 'region' };
+        handles.add(sphere);
+      }
       if (c.kind === 'frame') { // its axes, turned as the frame turns the map there
         const axes = new THREE.AxesHelper(handleRadius * 4);
         axes.position.fromArray(c.to);
@@ -303,7 +316,9 @@
     const point = hit.point.toArray();
     const tool = document.querySelector('input[name=tool]:checked').value;
     state.current.constraints.push(tool === 'pin' ? { kind: 'pin', point: point }
-      : tool === 'frame' ? { kind: 'frame', point: point, to: point.slice(), turn: [0, 0, 0, 1] } : { kind: 'move', point: point, to: point.slice() });
+      : tool === 'frame' ? { kind: 'frame', point: point, to: point.slice(), turn: [0, 0, 0, 1] }
+        : tool === 'region' ? { kind: 'region', point: point, to: point.slice(), turn: [0, 0, 0, 1], radius: +(model.boundingSphere.radius * 0.15).toPrecision(3) }
+          : { kind: 'move', point: point, to: point.slice() });
     selected = state.current.constraints.length - 1;
     commit();
     showSource(); rebuildHandles();
@@ -335,14 +350,14 @@
     const c = state.current.constraints[selected];
     if (!c || !c.to) return;
     c.to = gizmoTarget.position.toArray();
-    if (c.kind === 'frame') c.turn = gizmoTarget.quaternion.toArray();
+    if (c.turn) c.turn = gizmoTarget.quaternion.toArray(); // frames and regions turn
     rebuildHandles();
     requestDeform(Math.max(16, Math.round(fullResolution / 2)));
   });
   function attachGizmo() {
     const c = state.current.constraints[selected];
     if (!c || !c.to || c.kind === 'raw') { gizmo.detach(); return; }
-    if (gizmo.getMode() === 'rotate' && c.kind !== 'frame') gizmo.setMode('translate');
+    if (gizmo.getMode() === 'rotate' && !c.turn) gizmo.setMode('translate');
     gizmoTarget.position.fromArray(c.to);
     gizmoTarget.quaternion.fromArray(c.turn || [0, 0, 0, 1]);
     gizmoTarget.updateMatrixWorld();
@@ -350,7 +365,7 @@
   }
   function gizmoMode(mode) {
     const c = state.current.constraints[selected];
-    gizmo.setMode(mode === 'rotate' && !(c && c.kind === 'frame') ? 'translate' : mode);
+    gizmo.setMode(mode === 'rotate' && !(c && c.turn) ? 'translate' : mode);
     redraw();
   }
   document.getElementById('gizmo-move').onclick = () => gizmoMode('translate');
@@ -390,7 +405,15 @@
   };
 
   // ---- The selected handle in numbers: its point, target and (a frame's) turn as Euler angles in degrees. ------
-  const numbers = { point: document.getElementById('sel-point'), to: document.getElementById('sel-to'), turn: document.getElementById('sel-turn') };
+  const numbers = { point: document.getElementById('sel-point'), to: document.getElementById('sel-to'), turn: document.getElementById('sel-turn'),
+    radius: document.getElementById('sel-radius') };
+  numbers.radius.oninput = function () { // a region's radius, live on the slider
+    const c = state.current.constraints[selected];
+    if (!c || c.kind !== 'region') return;
+    c.radius = Number(numbers.radius.value);
+    rebuildHandles();
+  };
+  numbers.radius.onchange = function () { commit(); requestDeform(fullResolution); };
   const format = a => a.map(x => +x.toFixed(6)).join(', ');
   function showSelected() {
     const c = state.current.constraints[selected];
@@ -402,7 +425,9 @@
     numbers.to.disabled = c.kind === 'pin';
     const e = new THREE.Euler().setFromQuaternion(new THREE.Quaternion().fromArray(c.turn || [0, 0, 0, 1]), 'XYZ');
     numbers.turn.value = format([e.x, e.y, e.z].map(r => r * 180 / Math.PI));
-    numbers.turn.disabled = c.kind !== 'frame';
+    numbers.turn.disabled = !c.turn;
+    document.getElementById('radius-row').style.display = c.kind === 'region' ? '' : 'none';
+    if (c.kind === 'region') numbers.radius.value = c.radius;
   }
   function parseTriple(text) {
     const v = text.split(/[\s,]+/).filter(x => x.length).map(Number);
@@ -543,7 +568,17 @@
       : c.move && only(c, ['move', 'to', 'weight']) ? Object.assign({ kind: 'move', point: c.move, to: c.to }, weight(c))
         : c.frame && isPoint(c.frame) && only(c, ['frame', 'to', 'rotate', 'weight']) && (!c.rotate || (isPoint(c.rotate.axis) && isFinite(c.rotate.degrees)))
           ? loadedFrame(Object.assign({ kind: 'frame', point: c.frame, to: c.to || c.frame.slice(), turn: quaternionOf(c.rotate) }, weight(c)), c)
-          : { kind: 'raw', entry: c };
+          : c.region && c.region.sphere && isPoint(c.region.sphere[0]) && c.region.sphere[1] > 0 && only(c, ['region', 'translate', 'rotate', 'weight'])
+            && (!c.translate || isPoint(c.translate)) && (!c.rotate || (isPoint(c.rotate.axis) && isFinite(c.rotate.degrees)))
+            ? loadedFrame(loadedRegion(c), c)
+            : { kind: 'raw', entry: c };
+    const loadedRegion = function (c) { // the motion about the pivot, as a turn about the centre and a target for it
+      const centre = new THREE.Vector3().fromArray(c.region.sphere[0]);
+      const turn = new THREE.Quaternion().fromArray(quaternionOf(c.rotate));
+      const pivot = c.rotate && c.rotate.pivot ? new THREE.Vector3().fromArray(c.rotate.pivot) : centre.clone();
+      const to = centre.clone().sub(pivot).applyQuaternion(turn).add(pivot).add(new THREE.Vector3().fromArray(c.translate || [0, 0, 0]));
+      return Object.assign({ kind: 'region', point: c.region.sphere[0], to: to.toArray(), turn: turn.toArray(), radius: c.region.sphere[1] }, weight(c));
+    };
     const loadedFrame = function (handle, entry) {
       handle.entry = entry;
       handle.pristine = JSON.stringify([handle.point, handle.to, handle.turn]);
@@ -632,6 +667,9 @@
     model = Viewer.parsePly(await response.arrayBuffer());
     resultMesh.geometry = model;
     handleRadius = model.boundingSphere.radius * 0.025;
+    numbers.radius.min = (model.boundingSphere.radius * 0.02).toPrecision(3);
+    numbers.radius.max = (model.boundingSphere.radius * 0.8).toPrecision(3);
+    numbers.radius.step = (model.boundingSphere.radius * 0.005).toPrecision(3);
     resize();
     const centre = Viewer.frame(view, model.boundingBox, 30, 15, view.camera.aspect);
     controls.target.copy(centre);

@@ -131,3 +131,29 @@ def test_the_gizmo_turns_a_frame_handle_by_snapped_steps(box_page):  # noqa: F81
     assert rotate and abs(rotate["degrees"] - 90) < 1e-6 and abs(abs(rotate["axis"][2]) - 1) < 1e-9, frames[1]
     assert frames[1]["to"] == [0.546479, 2.546479, 0.3]
     wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON() && window.voxwarp.lastResolution === 48")
+
+
+def test_a_region_placed_sized_and_moved_and_one_loaded_as_it_came(box_page):  # noqa: F811
+    driver, _ = box_page
+    act = Actions(driver)
+    act.click("input[value=region]")
+    act.click_model([0.0, 0.0, 0.5])  # the box's front face, in the middle
+    wait(driver, "window.voxwarp.state.current.constraints.length === 1")
+    driver.execute_script("const r = document.getElementById('sel-radius'); r.value = 0.4;"
+                          "r.dispatchEvent(new Event('input')); r.dispatchEvent(new Event('change'))")
+    act.type("sel-to", "0, 0, 0.7")
+    wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON() && window.voxwarp.lastResolution === 48")
+    region = json.loads(driver.execute_script("return window.voxwarp.editJSON()"))["edits"][0]["constraints"][0]
+    (cx, cy, cz), radius = region["region"]["sphere"]
+    assert abs(cx) < 0.1 and abs(cy) < 0.1 and abs(cz - 0.5) < 1e-6 and abs(radius - 0.4) < 0.02, region  # the slider's step
+    assert [round(x, 9) for x in region["translate"]] == [round(-cx, 9), round(-cy, 9), 0.2], region
+    assert "rotate" not in region
+    assert driver.execute_script("return window.voxwarp.errors.length") == 0
+    # A region turned about a pivot, read from a file and saved back untouched.
+    edit = {"lattice": {"size": 9}, "edits": [{"solver": "rigid", "preserve_volume": False, "constraints": [
+        {"region": {"sphere": [[1.5, 0, 0], 0.6]}, "rotate": {"axis": [1, 0, 0], "degrees": 20, "pivot": [1.0, 0, 0]}},
+        {"pin": [-2, 0, 0]}]}]}
+    from test_editor_bugs import load_good
+    load_good(driver, edit)
+    assert json.loads(driver.execute_script("return window.voxwarp.editJSON()")) == edit
+    assert driver.execute_script("return window.voxwarp.state.current.constraints[0].kind") == "region"
