@@ -161,6 +161,10 @@
   api.visible = function () { return { source: sourceMesh.visible, result: resultMesh.visible }; };
   api.sourceIsModel = function () { return sourceMesh.geometry === model; };
   function syncControls() {
+    const lattice = state.lattice || {};
+    document.getElementById('lattice-size').value = lattice.size === undefined ? '' : [].concat(lattice.size).join(', ');
+    document.getElementById('lattice-placement').value = lattice.placement || 'uniform';
+    document.getElementById('lattice-padding').value = lattice.padding === undefined ? '' : lattice.padding;
     document.getElementById('solver').value = state.current.solver;
     document.getElementById('preserve-volume').checked = state.current.preserve_volume;
     document.getElementById('edits').textContent = state.edits.length ? state.edits.length + ' earlier edit(s), this is edit ' + (state.edits.length + 1) : '';
@@ -495,6 +499,21 @@
   document.getElementById('solver').onchange = function (e) { state.current.solver = e.target.value; commit(); requestDeform(fullResolution); };
   document.getElementById('preserve-volume').onchange = function (e) { state.current.preserve_volume = e.target.checked; commit(); requestDeform(fullResolution); };
   function toggleBefore() { before = !before; showSource(); }
+  /// The lattice's settings from the panel (empty fields: the defaults); the server checks their ranges.
+  function latticeChanged() {
+    const lattice = {};
+    const size = document.getElementById('lattice-size').value.split(/[\s,]+/).filter(x => x.length).map(Number);
+    if (size.length === 1) lattice.size = size[0];
+    else if (size.length === 3) lattice.size = size;
+    else if (size.length) { showError('lattice: expected n or nx, ny, nz'); syncControls(); return; }
+    const placement = document.getElementById('lattice-placement').value;
+    if (placement !== 'uniform' || (state.lattice && state.lattice.placement)) lattice.placement = placement;
+    const padding = document.getElementById('lattice-padding').value.trim();
+    if (padding.length) lattice.padding = Number(padding);
+    state.lattice = Object.keys(lattice).length ? lattice : null;
+    commit(); requestDeform(fullResolution);
+  }
+  for (const id of ['lattice-size', 'lattice-placement', 'lattice-padding']) document.getElementById(id).onchange = latticeChanged;
   document.getElementById('before').onchange = toggleBefore;
   window.addEventListener('keydown', function (e) {
     if (e.target.tagName === 'SELECT' || e.target.tagName === 'INPUT') return;

@@ -157,3 +157,14 @@ def test_a_region_placed_sized_and_moved_and_one_loaded_as_it_came(box_page):  #
     load_good(driver, edit)
     assert json.loads(driver.execute_script("return window.voxwarp.editJSON()")) == edit
     assert driver.execute_script("return window.voxwarp.state.current.constraints[0].kind") == "region"
+
+
+def test_the_lattice_is_set_from_the_panel_and_read_from_a_file(box_page):  # noqa: F811
+    driver, _ = box_page
+    from test_editor_bugs import load_good
+    load_good(driver, json.load(open(data("box_frames.json"))))
+    assert driver.execute_script("return document.getElementById('lattice-size').value") == "9, 5, 5"
+    Actions(driver).type("lattice-size", "7")
+    wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON() && window.voxwarp.lastResolution === 48")
+    assert json.loads(driver.execute_script("return window.voxwarp.editJSON()"))["lattice"] == {"size": 7}
+    assert driver.execute_script("return window.voxwarp.errors.length") == 0
