@@ -65,6 +65,14 @@ def _message(e):
     return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
 
 
+def _make_active(context, obj):
+    """The object alone selected, and active: what a user moves or looks at next."""
+    for o in context.selected_objects:
+        o.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+
+
 class _OnMesh:
     @classmethod
     def poll(cls, context):
@@ -101,10 +109,7 @@ class VOXWARP_OT_add_handle(_OnMesh, bpy.types.Operator):
             self.report({"ERROR"}, _message(e))
             return {"CANCELLED"}
         if obj.mode == "OBJECT":
-            for o in context.selected_objects:
-                o.select_set(False)
-            e.select_set(True)
-            context.view_layer.objects.active = e
+            _make_active(context, e)
         self.report({"INFO"}, f"{e.name} at ({point.x:.4g}, {point.y:.4g}, {point.z:.4g})")
         return {"FINISHED"}
 
@@ -140,10 +145,7 @@ class VOXWARP_OT_deform(_OnMesh, bpy.types.Operator):
             wm.progress_end()
         obj.voxwarp.status = line
         if not self.in_place:
-            for o in context.selected_objects:
-                o.select_set(False)
-            out.select_set(True)
-            context.view_layer.objects.active = out
+            _make_active(context, out)
         self.report({"INFO"}, f"{out.name}: {line}")
         return {"FINISHED"}
 
