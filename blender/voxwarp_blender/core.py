@@ -200,6 +200,11 @@ def handle_collection(obj):
     return c
 
 
+def handle_size(obj, fraction):
+    """A handle's display size: `fraction` of the mesh's bounding-box diagonal (its own frame)."""
+    return (Vector(obj.bound_box[6]) - Vector(obj.bound_box[0])).length * fraction or fraction  # local bounds' max and min corners
+
+
 def add_handle(obj, kind, location, size, target=None, weight=None):
     """A new handle of `kind` at `location` (local frame), resting there; `target` (local) moves it at once."""
     if kind not in KINDS:
@@ -232,13 +237,18 @@ def set_rest(e):
     e[TO] = [float(x) for x in location]
 
 
-def local_frame(e):
-    """The handle's location and rotation in its mesh's frame."""
+def _local_matrix(e):
+    """The handle's transform in its mesh's frame (its own, as parented by add_handle, or through the world)."""
     if e.matrix_parent_inverse == Matrix.Identity(4):
-        m = e.matrix_basis
-        return e.location.copy(), m.to_quaternion()
-    m = e.parent.matrix_world.inverted_safe() @ e.matrix_world
-    return m.to_translation(), m.to_quaternion()
+        return e.matrix_basis
+    return e.parent.matrix_world.inverted_safe() @ e.matrix_world
+
+
+def local_frame(e):
+    """The handle's location and rotation in its mesh's frame (the location exact as set, when parented so)."""
+    m = _local_matrix(e)
+    location = e.location.copy() if e.matrix_parent_inverse == Matrix.Identity(4) else m.to_translation()
+    return location, m.to_quaternion()
 
 
 def _exact(e, location):
@@ -250,8 +260,7 @@ def _exact(e, location):
 
 
 def _scale(e):
-    m = e.matrix_basis if e.matrix_parent_inverse == Matrix.Identity(4) else e.parent.matrix_world.inverted_safe() @ e.matrix_world
-    return max(abs(s) for s in m.to_scale())
+    return max(abs(s) for s in _local_matrix(e).to_scale())
 
 
 def _rotate(turn, pivot=None):
@@ -336,11 +345,10 @@ def _turn(e, rotate):
 
 
 def import_edit(obj, edit, settings, size):
-    """Handles for an edit file's last edit (moves and frames become handles at their targets, turned as the
-    frame says; pins pins; sphere regions sphere Empties moved and turned by their motion); its lattice and solver go
-    into the settings; earlier edits, control-point offsets, box regions and connects are kept on the mesh as they
-    are."""
-    module().read_edit(edit)  # refused here with the file's own message if malformed
+    """Handles for an edit file's last edit, already validated by voxwarp.read_edit: moves and frames become handles
+    at their targets, turned as a frame says; pins pins; sphere regions sphere Empties moved and turned by their
+    motion. Its lattice and solver go into the settings; earlier edits, control-point offsets, box regions, connects,
+    normals and slides are kept on the mesh as they are."""
     for e in handles(obj):
         bpy.data.objects.remove(e)
     lattice = edit.get("lattice", {})

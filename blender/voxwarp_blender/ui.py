@@ -102,9 +102,7 @@ class VOXWARP_OT_add_handle(_OnMesh, bpy.types.Operator):
                 point = sum(selected, Vector()) / len(selected)
             else:
                 point = obj.matrix_world.inverted_safe() @ context.scene.cursor.location
-            diagonal = (Vector(obj.bound_box[6]) - Vector(obj.bound_box[0])).length or 1.0  # local bounds' max and min corners
-            size = diagonal * (0.15 if self.kind == "REGION" else 0.05)
-            e = core.add_handle(obj, self.kind.lower(), point, size)
+            e = core.add_handle(obj, self.kind.lower(), point, core.handle_size(obj, 0.15 if self.kind == "REGION" else 0.05))
         except Exception as e:  # noqa: BLE001 (reported, never raised into Blender)
             self.report({"ERROR"}, _message(e))
             return {"CANCELLED"}
@@ -209,9 +207,7 @@ class VOXWARP_OT_import_edit(_OnMesh, ImportHelper, bpy.types.Operator):
             core.module(obj.voxwarp.module_preference()).read_edit(self.filepath)  # the file's own message if it is wrong
             with open(self.filepath) as f:
                 edit = json.load(f)
-            V, _, _ = core.source_arrays(obj)
-            size = 0.05 * float(((V.max(axis=0) - V.min(axis=0)) ** 2).sum() ** 0.5)
-            made, kept = core.import_edit(obj, edit, obj.voxwarp, size)
+            made, kept = core.import_edit(obj, edit, obj.voxwarp, core.handle_size(obj, 0.05))
         except Exception as e:  # noqa: BLE001
             self.report({"ERROR"}, _message(e))
             return {"CANCELLED"}

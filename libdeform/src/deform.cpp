@@ -83,15 +83,13 @@ std::vector<Constraint> expand_entries(const std::vector<Constraint>& constraint
         const std::vector<Eigen::Vector3d> inside = material(k.region);
         if (inside.empty()) throw InvalidInput(k.name + ".region: holds none of the model's material");
         const Eigen::Vector3d middle = k.region.sphere ? k.region.centre : Eigen::Vector3d((k.region.lo + k.region.hi) / 2);
-        std::vector<double> distance(inside.size());
+        std::vector<double> distance(inside.size(), std::numeric_limits<double>::infinity());
         std::size_t next = 0;
         for (std::size_t i = 0; i < inside.size(); ++i)
             if ((inside[i] - middle).squaredNorm() < (inside[next] - middle).squaredNorm()) next = i;
-        std::fill(distance.begin(), distance.end(), std::numeric_limits<double>::infinity());
         for (int n = 0; n < kRegionPoints && distance[next] > 0; ++n) {
-            Constraint m = k;
+            Constraint m = k; // its name and entry ("region") with it
             m.kind = ConstraintKind::move;
-            m.entry = "region";
             m.point = inside[next];
             m.to = k.rotation * (m.point - k.pivot) + k.pivot + k.offset;
             rows.push_back(m), owner.push_back(int(c));
@@ -153,18 +151,16 @@ std::function<std::vector<Eigen::Vector3d>(const RegionShape&)> material_of(cons
 void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, double fraction) {
     const Eigen::Vector3d margin = fraction * (hi - lo);
     const double reach = (hi - lo).maxCoeff();
+    auto text = [](const Eigen::Vector3d& p) { return std::to_string(p.x()) + ", " + std::to_string(p.y()) + ", " + std::to_string(p.z()); };
+    const std::string bounds = std::to_string(lo.x()) + ".." + std::to_string(hi.x()) + ", " + std::to_string(lo.y()) + ".." +
+                               std::to_string(hi.y()) + ", " + std::to_string(lo.z()) + ".." + std::to_string(hi.z());
     for (const auto& c : constraints) {
         if (c.kind == ConstraintKind::control_point || c.kind == ConstraintKind::region) continue; // a region's points are the model's
         for (const Eigen::Vector3d& p : {c.point, c.kind == ConstraintKind::join ? c.to : c.point})
             if ((p.array() < (lo - margin).array()).any() || (p.array() > (hi + margin).array()).any())
-                throw InvalidInput(c.name + ": point (" + std::to_string(p.x()) + ", " + std::to_string(p.y()) + ", " + std::to_string(p.z()) +
-                                   ") lies far outside the model (bounds " + std::to_string(lo.x()) + ".." + std::to_string(hi.x()) + ", " +
-                                   std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " + std::to_string(lo.z()) + ".." + std::to_string(hi.z()) + ")");
+                throw InvalidInput(c.name + ": point (" + text(p) + ") lies far outside the model (bounds " + bounds + ")");
         if (c.kind == ConstraintKind::move && ((c.to.array() < lo.array() - reach).any() || (c.to.array() > hi.array() + reach).any()))
-            throw InvalidInput(c.name + ".to: target (" + std::to_string(c.to.x()) + ", " + std::to_string(c.to.y()) + ", " + std::to_string(c.to.z()) +
-                               ") lies more than the model's size (" + std::to_string(reach) + ") outside its bounds (" + std::to_string(lo.x()) + ".." +
-                               std::to_string(hi.x()) + ", " + std::to_string(lo.y()) + ".." + std::to_string(hi.y()) + ", " + std::to_string(lo.z()) + ".." +
-                               std::to_string(hi.z()) + ")");
+            throw InvalidInput(c.name + ".to: target (" + text(c.to) + ") lies more than the model's size (" + std::to_string(reach) + ") outside its bounds (" + bounds + ")");
     }
 }
 
