@@ -263,6 +263,20 @@ TEST(Rigid, WeightedMovesMeetHalfWay) {
     EXPECT_LE(r.residuals[2], 1e-9); // the pin holds exactly
 }
 
+TEST(Rigid, ConflictingMovesWithoutPinsMeetHalfWay) {
+    // Two moves of one point to different targets and no pin: least squares with no row held exactly (this solve
+    // once decomposed an empty matrix for the hard rows and crashed; ten frames on the box reached it too).
+    const test::Bar bar{4, 1};
+    const Solve s = box_solve(bar, 1.0 / 16);
+    Constraint a, b;
+    a.kind = b.kind = ConstraintKind::move;
+    a.point = b.point = Eigen::Vector3d(2, 0, 0);
+    a.to = Eigen::Vector3d(2, 0.4, 0), b.to = Eigen::Vector3d(2, 0, 0);
+    const RigidSolution r = solve_rigid(s.domain.lattice, {a, b}, s.material);
+    EXPECT_TRUE(r.least_squares);
+    EXPECT_NEAR(r.lattice.evaluate(s.domain.lattice.parameter_of(a.point)).y(), 0.2, 0.01);
+}
+
 TEST(Rigid, ClampedPlacementHoldsItsPins) {
     const test::Bar bar{4, 1};
     WarpDomain domain = make_domain(voxelize_sparse(test::box_mesh(bar.lo(), bar.hi(), 1), {.voxel_size = 1.0 / 16}),

@@ -567,7 +567,9 @@ RigidSolution solve_rigid(const Lattice& rest, const std::vector<Constraint>& co
         d.row(r) = target[std::size_t(c)].transpose();
     }
     const Eigen::MatrixXd Y = h > 0 ? H.solve(C.transpose()) : Eigen::MatrixXd(u, 0);
-    const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> schur(C * Y);
+    // Eigen's decompositions fault on an empty matrix: without hard rows (least squares without pins) there is none.
+    Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> schur;
+    if (h > 0) schur.compute(C * Y);
     // The material's volume relative to its own, V = sum a_c det F_c (a_c summing to one), is held at 1 (rigid, or
     // preserve_volume): its linearisation at the current point, <v, x> = 1 - V + <v, P>, v = dV/dP, joins the hard
     // rows of the global step. One more solve per step (w = H^-1 v), and the volume settles with the shape.
