@@ -5,6 +5,8 @@
 //   GET  /api/edit              the edit file given on the command line (204 when none)
 //   POST /api/deform[?resolution=N]   body: an edit file's JSON; 200: the deformed mesh (binary PLY,
 //                               Content-Type application/ply), the report as JSON in the X-Voxwarp-Report header
+//   GET  /api/lattice           the last deform's last edit's lattice: {"size": [nx, ny, nz], "rest": [[x, y, z], ...],
+//                               "solved": [...]}, control point i + nx (j + ny k) (204 before the first deform)
 // Errors answer {"error": message}: 400 malformed edits (the CLI's message, the file named "request") or a
 // resolution over --max-resolution, 403 a foreign Host or Origin or a missing token (web.h, Gate), 404 unknown
 // paths, 409 a request superseded by a newer one (which runs instead), 413 bodies over 16 MiB, 503 memory or
@@ -94,6 +96,7 @@ public:
             const TriangleMesh out = session_.deform(script, resolution, report, progress, resolution >= args_.resolution);
             report.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             send_mesh(response, out);
+            if (!report.edits.empty()) lattice_ = lattice_json(report.edits.back());
             // One line of JSON: a header holds it.
             response.set_header("X-Voxwarp-Report", nlohmann::json::parse(report_json(report)).dump());
         } catch (const Cancelled&) {
@@ -109,6 +112,24 @@ public:
         } catch (const std::bad_alloc&) {
             send_error(response, 503, "out of memory; lower the resolution");
         }
+    }
+
+    void lattice(httplib::Response& response) {
+        std::lock_guard lock(mutex_);
+        if (lattice_.empty()) {
+            response.status = 204;
+            return;
+        }
+        response.set_content(lattice_, "application/json");
+    }
+
+    static std::string lattice_json(const EditReport& edit) {
+        auto points = [](const std::vector<Eigen::Vector3d>& ps) {
+            nlohmann::json out = nlohmann::json::array();
+            for (const auto& p : ps) out.push_back({p.x(), p.y(), p.z()});
+            return out;
+        };
+        return nlohmann::json{{"size", edit.lattice_size}, {"rest", points(edit.lattice_rest)}, {"solved", points(edit.lattice_solved)}}.dump();
     }
 
     void model(httplib::Response& response) const {
@@ -128,6 +149,7 @@ private:
     DeformSession session_;
     std::mutex mutex_;
     std::atomic<std::uint64_t> latest_{0};
+    std::string lattice_; // lattice_json of the last deform, under mutex_
 };
 
 } // namespace
@@ -185,6 +207,7 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
                 if (initial_edit.empty()) r.status = 204;
                 else r.set_content(initial_edit, "application/json");
             });
+            server.Get("/api/lattice", [&](const httplib::Request&, httplib::Response& r) { editor.lattice(r); });
             server.Post("/api/deform", [&](const httplib::Request& q, httplib::Response& r) { editor.deform(q, r); });
             server.Get("/favicon.ico", [](const httplib::Request&, httplib::Response& r) { r.status = 204; });
             server.Post(R"(/.*)", [](const httplib::Request& q, httplib::Response& r) { send_error(r, 404, "no such path: " + q.path); });

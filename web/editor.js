@@ -7,6 +7,24 @@
   // No multisampling: with software WebGL (SwiftShader) it costs more than the live result can spare.
   const view = Viewer.create(canvas, canvas.clientWidth || 800, canvas.clientHeight || 600, false);
   const controls = new THREE.OrbitControls(view.camera, canvas);
+  // Orthographic view: the perspective camera stays the one the controls move; the orthographic one copies its
+  // place and turn, with the view height the perspective one has at the orbit's centre, whenever it is used.
+  const ortho = new THREE.OrthographicCamera(-1, 1, 1, -1, 0.01, 1000);
+  let orthographic = false;
+  function eye() {
+    if (!orthographic) return view.camera;
+    view.camera.updateMatrixWorld();
+    ortho.position.copy(view.camera.position);
+    ortho.quaternion.copy(view.camera.quaternion);
+    const distance = view.camera.position.distanceTo(controls.target);
+    const half = distance * Math.tan(view.camera.fov * Math.PI / 360);
+    ortho.top = half; ortho.bottom = -half;
+    ortho.left = -half * view.camera.aspect; ortho.right = half * view.camera.aspect;
+    ortho.near = view.camera.near; ortho.far = view.camera.far;
+    ortho.updateProjectionMatrix();
+    ortho.updateMatrixWorld();
+    return ortho;
+  }
   controls.enableDamping = false;
   let needsRender = true; // frames are drawn when something changed, not continuously
   function redraw() { needsRender = true; }
@@ -174,7 +192,7 @@
   // at once (the server cancels the preview it supersedes) and no queued preview is sent after it.
   let inFlight = false, pending = 0, issued = 0, lastFull = 0;
   function requestDeform(resolution) {
-    if (!script().edits.length) { resultMesh.geometry = model; showSource(); return Promise.resolve(true); }
+    if (!script().edits.length) { resultMesh.geometry = model; showSource(); refreshLattice(); return Promise.resolve(true); }
     const full = resolution === fullResolution;
     if (full) { lastFull = ++issued; pending = 0; }
     else if (inFlight) { pending = resolution; return Promise.resolve(true); }
@@ -198,7 +216,7 @@
         if (previous !== resultMesh.geometry && !isSource(previous)) previous.dispose();
         redraw();
         lastReport = JSON.parse(response.headers.get('X-Voxwarp-Report') || '{}');
-        if (full) lastFullPly = buffer;
+        if (full) { lastFullPly = buffer; refreshLattice(); }
         api.shownEdit = body;
         api.lastResolution = resolution;
         api.resultVersion++;
@@ -259,7 +277,7 @@
   canvas.addEventListener('pointerdown', function (event) {
     gizmoDragged = false;
     if (event.button !== 0 || gizmo.axis) return; // on the gizmo: it takes the drag
-    raycaster.setFromCamera(ndc(event), view.camera);
+    raycaster.setFromCamera(ndc(event), eye());
     const hit = raycaster.intersectObjects(handles.children.filter(h => h.isMesh))[0];
     down = { x: event.clientX, y: event.clientY, hit: hit };
     if (hit && hit.object.userData.role === 'target') {
@@ -283,7 +301,7 @@
       c.to = to.toArray();
       dragging.plane.setFromNormalAndCoplanarPoint(dir, to);
     } else {
-      raycaster.setFromCamera(ndc(event), view.camera);
+      raycaster.setFromCamera(ndc(event), eye());
       const p = new THREE.Vector3();
       if (!raycaster.ray.intersectPlane(dragging.plane, p)) return;
       c.to = p.toArray();
@@ -314,7 +332,7 @@
       return;
     }
     down = null;
-    raycaster.setFromCamera(ndc(event), view.camera);
+    raycaster.setFromCamera(ndc(event), eye());
     const hit = pickSource();
     if (!hit) return;
     const point = hit.point.toArray();
@@ -483,6 +501,51 @@
   document.getElementById('view-all').onclick = () => look(viewAngles[0], viewAngles[1]);
   document.getElementById('view-selected').onclick = () => look(viewAngles[0], viewAngles[1], true);
   api.cameraDirection = () => view.camera.getWorldDirection(new THREE.Vector3()).toArray();
+  function setOrthographic(on) {
+    orthographic = on;
+    document.getElementById('ortho').checked = on;
+    gizmo.camera = eye();
+    redraw();
+  }
+  document.getElementById('ortho').onchange = e => setOrthographic(e.target.checked);
+  api.setOrthographic = setOrthographic;
+  api.orthographic = () => orthographic;
+
+  // ---- The lattice on demand: the current edit's control points as solved (dark) and at rest (light), joined
+  // along each axis; fetched from GET /api/lattice after each full result while shown. ---------------------------
+  const latticeGroup = new THREE.Group();
+  latticeGroup.visible = false;
+  view.scene.add(latticeGroup);
+  let latticeFacts = null;
+  function latticeLines(points, size, colour, opacity) {
+    const [nx, ny, nz] = size, at = (i, j, k) => points[i + nx * (j + ny * k)], segments = [];
+    for (let k = 0; k < nz; k++)
+      for (let j = 0; j < ny; j++)
+        for (let i = 0; i < nx; i++) {
+          if (i + 1 < nx) segments.push(...at(i, j, k), ...at(i + 1, j, k));
+          if (j + 1 < ny) segments.push(...at(i, j, k), ...at(i, j + 1, k));
+          if (k + 1 < nz) segments.push(...at(i, j, k), ...at(i, j, k + 1));
+        }
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.Float32BufferAttribute(segments, 3));
+    return new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ color: colour, transparent: opacity < 1, opacity: opacity }));
+  }
+  async function refreshLattice() {
+    const shown = document.getElementById('show-lattice').checked;
+    latticeGroup.visible = shown && script().edits.length > 0;
+    if (!latticeGroup.visible) { redraw(); return; }
+    const response = await Viewer.api('/api/lattice');
+    if (response.status !== 200) return;
+    const data = await response.json();
+    latticeGroup.children.slice().forEach(c => { c.geometry.dispose(); latticeGroup.remove(c); });
+    latticeGroup.add(latticeLines(data.rest, data.size, 0x8890a0, 0.35));
+    latticeGroup.add(latticeLines(data.solved, data.size, 0x2a4d8f, 1));
+    latticeFacts = { size: data.size, points: data.solved.length, segments: latticeGroup.children[1].geometry.attributes.position.count / 2, solved: data.solved };
+    api.latticeVersion = (api.latticeVersion || 0) + 1;
+    redraw();
+  }
+  document.getElementById('show-lattice').onchange = refreshLattice;
+  api.lattice = () => ({ visible: latticeGroup.visible, facts: latticeFacts });
 
   // ---- Buttons and keys. -------------------------------------------------------------------------------------
   function remove() {
@@ -523,6 +586,11 @@
     else if (e.key === 'b' && !e.ctrlKey && !e.metaKey) { toggleBefore(); e.preventDefault(); }
     else if (e.key === 'g' && !e.ctrlKey && !e.metaKey) { gizmoMode('translate'); e.preventDefault(); }
     else if (e.key === 'r' && !e.ctrlKey && !e.metaKey) { gizmoMode('rotate'); e.preventDefault(); }
+    else if (e.key === 'o' && !e.ctrlKey && !e.metaKey) { setOrthographic(!orthographic); e.preventDefault(); }
+    else if (e.key === 'l' && !e.ctrlKey && !e.metaKey) {
+      const box = document.getElementById('show-lattice');
+      box.checked = !box.checked; refreshLattice(); e.preventDefault();
+    }
   });
   document.getElementById('next-edit').onclick = async function () {
     if (!state.current.constraints.length) return;
@@ -633,14 +701,14 @@
   /// Canvas pixel (relative to the canvas' top-left) of a world point.
   api.screenOf = function (p) {
     view.camera.updateMatrixWorld(); // a view just set is drawn only at the next frame
-    const v = new THREE.Vector3().fromArray(p).project(view.camera);
+    const v = new THREE.Vector3().fromArray(p).project(eye());
     const r = canvas.getBoundingClientRect();
     return [(v.x + 1) / 2 * r.width, (1 - v.y) / 2 * r.height];
   };
   /// The model point under canvas pixel (x, y), or null.
   api.pick = function (x, y) {
     const r = canvas.getBoundingClientRect();
-    raycaster.setFromCamera(new THREE.Vector2(x / r.width * 2 - 1, -(y / r.height) * 2 + 1), view.camera);
+    raycaster.setFromCamera(new THREE.Vector2(x / r.width * 2 - 1, -(y / r.height) * 2 + 1), eye());
     const hit = pickSource();
     return hit ? hit.point.toArray() : null;
   };
@@ -668,7 +736,8 @@
     needsRender = false;
     view.lights[0].position.copy(view.camera.position).multiplyScalar(1.5);
     const t = performance.now();
-    view.renderer.render(view.scene, view.camera);
+    gizmo.camera = eye();
+    view.renderer.render(view.scene, gizmo.camera);
     view.renderer.getContext().finish();
     api.frames = (api.frames || 0) + 1;
     api.renderMs = performance.now() - t;

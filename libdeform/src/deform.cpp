@@ -382,6 +382,9 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
             er.steps = plan_steps(domain, rows, edit.preserve_volume, options, solution, er.folds_remain, er.iterations);
         }
         record(er, solution, constraints, owner, er.steps, h);
+        er.lattice_size = solution.lattice.size();
+        er.lattice_rest = domain.lattice.points();
+        er.lattice_solved = solution.lattice.points();
         er.seconds_solve += seconds_since(t);
         for (std::size_t c = 0; c < constraints.size(); ++c) {
             std::tie(er.constraints[c].source_miss_voxels, er.constraints[c].source_thin) = sources[c];
@@ -571,6 +574,9 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         er.folds_remain = !folds.empty();
         er.folded_regions = int(folds.size());
         record(er, solution, constraints, owner, 1, frame.voxel_size);
+        er.lattice_size = solution.lattice.size();
+        er.lattice_rest = rest.points();
+        er.lattice_solved = solution.lattice.points();
         er.volume_before = enclosed_volume(out);
         for (auto& v : out.vertices) v = solution.lattice.evaluate(rest.parameter_of(v));
         er.volume_after = enclosed_volume(out);

@@ -168,3 +168,47 @@ def test_the_lattice_is_set_from_the_panel_and_read_from_a_file(box_page):  # no
     wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON() && window.voxwarp.lastResolution === 48")
     assert json.loads(driver.execute_script("return window.voxwarp.editJSON()"))["lattice"] == {"size": 7}
     assert driver.execute_script("return window.voxwarp.errors.length") == 0
+
+
+def test_the_lattice_is_shown_on_demand_as_the_edit_solved_it(box_page):  # noqa: F811
+    driver, _ = box_page
+    from test_editor_bugs import load_good
+    load_good(driver, json.load(open(data("box_frames.json"))))  # the bend: 9 x 5 x 5, the right end raised 2.5
+    wait(driver, "window.voxwarp.shownEdit === window.voxwarp.editJSON()")
+    assert not driver.execute_script("return window.voxwarp.lattice().visible")
+    Actions(driver).click("#show-lattice")
+    wait(driver, "window.voxwarp.latticeVersion >= 1")
+    shown = driver.execute_script("return window.voxwarp.lattice()")
+    assert shown["visible"]
+    nx, ny, nz = shown["facts"]["size"]
+    assert [nx, ny, nz] == [9, 5, 5]
+    assert shown["facts"]["segments"] == (nx - 1) * ny * nz + nx * (ny - 1) * nz + nx * ny * (nz - 1)
+    solved = shown["facts"]["solved"]
+    layer = lambda i: [solved[i + nx * (j + ny * k)] for k in range(nz) for j in range(ny)]  # noqa: E731
+    mean_y = lambda ps: sum(p[1] for p in ps) / len(ps)  # noqa: E731
+    # The raised end's control points follow it up, about 2.5 above the held end's (the rigid solve leaves the
+    # empty padding around the box nearly free, so the held end's outer layer swings a little about the frame).
+    assert mean_y(layer(nx - 1)) - mean_y(layer(0)) > 1.5, (mean_y(layer(0)), mean_y(layer(nx - 1)))
+    # Another edit on the panel redraws it: a 7^3 lattice.
+    Actions(driver).type("lattice-size", "7")
+    wait(driver, "window.voxwarp.lattice().facts.size[0] === 7")
+    Actions(driver).click("#show-lattice")
+    assert not driver.execute_script("return window.voxwarp.lattice().visible")
+    assert driver.execute_script("return window.voxwarp.errors.length") == 0
+
+
+def test_the_orthographic_view_has_no_perspective_and_still_picks(box_page):  # noqa: F811
+    driver, _ = box_page
+    driver.find_element("id", "view-front").click()  # looking along -z
+    gap = ("const a = window.voxwarp.screenOf([2, 0.5, 0.5]), b = window.voxwarp.screenOf([2, 0.5, -0.5]);"
+           "return Math.hypot(a[0] - b[0], a[1] - b[1])")  # pixels between two points one behind the other
+    assert driver.execute_script(gap) > 3
+    Actions(driver).click("#ortho")
+    assert driver.execute_script("return window.voxwarp.orthographic()")
+    assert driver.execute_script(gap) < 0.5
+    act = Actions(driver)
+    act.click("input[value=pin]")
+    act.click_model([1.5, 0.2, 0.5])  # on the front face, as the orthographic view shows it
+    wait(driver, "window.voxwarp.state.current.constraints.length === 1")
+    point = driver.execute_script("return window.voxwarp.state.current.constraints[0].point")
+    assert math.dist(point, [1.5, 0.2, 0.5]) < 0.05, point

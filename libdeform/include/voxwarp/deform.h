@@ -10,6 +10,7 @@
 #include <voxwarp/extract.h>
 #include <voxwarp/voxelize.h>
 
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
@@ -61,6 +62,10 @@ struct EditReport {
     double seconds_solve = 0;
     double volume_before = 0, volume_after = 0; ///< voxmap mass before and after this edit, world units^3
     std::vector<ConstraintReport> constraints;
+    /// The edit's lattice (its first step's, when it was split into steps): control points per axis, and their
+    /// world positions at rest and as solved, index i + nx (j + ny k). For showing the lattice; not in the JSON report.
+    std::array<int, 3> lattice_size{};
+    std::vector<Eigen::Vector3d> lattice_rest, lattice_solved;
 };
 
 /// A part of the model the voxmap lost: thinner than a voxel when voxelized (a flood fill keeps a part only where
