@@ -36,6 +36,20 @@ inline int region_of(double s, int regions, double& t) {
     return a;
 }
 
+using AxisBasis = std::array<std::array<double, 4>, 3>; // per axis, the four basis functions' values (or slopes)
+
+/// Per axis: the region holding stu, the basis values at its local parameter and, when `slopes` is given, their
+/// derivatives.
+inline void basis_at(const std::array<int, 3>& size, const Eigen::Vector3d& stu, std::array<int, 3>& region, AxisBasis& values,
+                     AxisBasis* slopes = nullptr) {
+    for (int a = 0; a < 3; ++a) {
+        double t;
+        region[std::size_t(a)] = region_of(stu[a], size[std::size_t(a)] - 3, t);
+        values[std::size_t(a)] = cubic_basis(t);
+        if (slopes) (*slopes)[std::size_t(a)] = cubic_basis_derivative(t);
+    }
+}
+
 } // namespace
 
 Lattice Lattice::uniform(const std::array<int, 3>& size, const Eigen::Vector3d& origin, const Eigen::Vector3d& spacing) {
@@ -78,25 +92,16 @@ Lattice Lattice::clamped(const std::array<int, 3>& size, const Eigen::Vector3d& 
 }
 
 void Lattice::weights(const Eigen::Vector3d& stu, std::array<int, 3>& region, std::array<double, 64>& w) const {
-    std::array<std::array<double, 4>, 3> b;
-    for (int a = 0; a < 3; ++a) {
-        double t;
-        region[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
-        b[std::size_t(a)] = cubic_basis(t);
-    }
+    AxisBasis b;
+    basis_at(size_, stu, region, b);
     for (int k = 0; k < 4; ++k)
         for (int j = 0; j < 4; ++j)
             for (int i = 0; i < 4; ++i) w[std::size_t(i + 4 * (j + 4 * k))] = b[0][std::size_t(i)] * b[1][std::size_t(j)] * b[2][std::size_t(k)];
 }
 
 void Lattice::derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector3d& dstu, std::array<int, 3>& region, std::array<double, 64>& w) const {
-    std::array<std::array<double, 4>, 3> b, d;
-    for (int a = 0; a < 3; ++a) {
-        double t;
-        region[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
-        b[std::size_t(a)] = cubic_basis(t);
-        d[std::size_t(a)] = cubic_basis_derivative(t);
-    }
+    AxisBasis b, d;
+    basis_at(size_, stu, region, b, &d);
     for (int k = 0; k < 4; ++k)
         for (int j = 0; j < 4; ++j)
             for (int i = 0; i < 4; ++i) {
@@ -124,13 +129,8 @@ Eigen::Matrix3d Lattice::jacobian(const Eigen::Vector3d& stu) const {
 
 Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu, Eigen::Matrix3d& J) const {
     std::array<int, 3> r;
-    std::array<std::array<double, 4>, 3> b, d;
-    for (int a = 0; a < 3; ++a) {
-        double t;
-        r[std::size_t(a)] = region_of(stu[a], size_[std::size_t(a)] - 3, t);
-        b[std::size_t(a)] = cubic_basis(t);
-        d[std::size_t(a)] = cubic_basis_derivative(t);
-    }
+    AxisBasis b, d;
+    basis_at(size_, stu, r, b, &d);
     // Contract along s first (value and s-derivative per row), then t, then u: 3 x 64 + 2 x 16 + 4 products
     // instead of four separate passes over the 64 points.
     Eigen::Vector3d p = Eigen::Vector3d::Zero();
