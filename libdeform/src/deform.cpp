@@ -208,8 +208,13 @@ int plan_steps(const WarpDomain& domain, const std::vector<Constraint>& rows, bo
     }
 }
 
-/// The report's entry per constraint row of the edit; `owner` maps the solved rows (regions expanded) to them.
-void record(EditReport& er, const ConstraintSolution& solution, const std::vector<Constraint>& constraints, const std::vector<int>& owner, int steps, double h) {
+/// The report's entry per constraint row of the edit (`owner` maps the solved rows, regions expanded, to them), and
+/// the edit's lattice: `rest`, and as solved.
+void record(EditReport& er, const Lattice& rest, const ConstraintSolution& solution, const std::vector<Constraint>& constraints, const std::vector<int>& owner,
+            int steps, double h) {
+    er.lattice_size = solution.lattice.size();
+    er.lattice_rest = rest.points();
+    er.lattice_solved = solution.lattice.points();
     er.least_squares = solution.least_squares;
     er.rank = solution.rank;
     er.unknowns = solution.unknowns;
@@ -381,10 +386,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
         } else {
             er.steps = plan_steps(domain, rows, edit.preserve_volume, options, solution, er.folds_remain, er.iterations);
         }
-        record(er, solution, constraints, owner, er.steps, h);
-        er.lattice_size = solution.lattice.size();
-        er.lattice_rest = domain.lattice.points();
-        er.lattice_solved = solution.lattice.points();
+        record(er, domain.lattice, solution, constraints, owner, er.steps, h);
         er.seconds_solve += seconds_since(t);
         for (std::size_t c = 0; c < constraints.size(); ++c) {
             std::tie(er.constraints[c].source_miss_voxels, er.constraints[c].source_thin) = sources[c];
@@ -573,10 +575,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         const auto folds = find_folds(solution.lattice);
         er.folds_remain = !folds.empty();
         er.folded_regions = int(folds.size());
-        record(er, solution, constraints, owner, 1, frame.voxel_size);
-        er.lattice_size = solution.lattice.size();
-        er.lattice_rest = rest.points();
-        er.lattice_solved = solution.lattice.points();
+        record(er, rest, solution, constraints, owner, 1, frame.voxel_size);
         er.volume_before = enclosed_volume(out);
         for (auto& v : out.vertices) v = solution.lattice.evaluate(rest.parameter_of(v));
         er.volume_after = enclosed_volume(out);

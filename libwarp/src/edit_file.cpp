@@ -118,9 +118,12 @@ void parse_constraint(const Context& ctx, const json& v, const std::string& path
     c.name = path;
     static const char* kinds[] = {"move", "pin", "control_point", "frame", "region", "connect", "normal", "slide"};
     int count = 0;
-    for (const char* k : kinds) count += int(v.contains(k));
-    if (count != 1)
-        ctx.fail(path, "expected exactly one of \"move\", \"pin\", \"control_point\", \"frame\", \"region\", \"connect\", \"normal\", \"slide\"");
+    std::string names;
+    for (const char* k : kinds) {
+        count += int(v.contains(k));
+        names += std::string(names.empty() ? "" : ", ") + "\"" + k + "\"";
+    }
+    if (count != 1) ctx.fail(path, "expected exactly one of " + names);
     std::vector<Constraint> rows;
     if (v.contains("move")) {
         only_keys(ctx, v, path, {"move", "to", "weight"});
