@@ -651,12 +651,13 @@
     // A move or pin with nothing else than its fields becomes a handle; anything else goes to the server as it came.
     const only = (c, keys) => Object.keys(c).every(k => keys.indexOf(k) >= 0);
     const weight = c => ('weight' in c ? { weight: c.weight } : {});
+    const turnable = c => !c.rotate || (isPoint(c.rotate.axis) && isFinite(c.rotate.degrees)); // no turn, or one the page can show
     const toConstraint = c => c.pin && only(c, ['pin', 'weight']) ? Object.assign({ kind: 'pin', point: c.pin }, weight(c))
       : c.move && only(c, ['move', 'to', 'weight']) ? Object.assign({ kind: 'move', point: c.move, to: c.to }, weight(c))
-        : c.frame && isPoint(c.frame) && only(c, ['frame', 'to', 'rotate', 'weight']) && (!c.rotate || (isPoint(c.rotate.axis) && isFinite(c.rotate.degrees)))
+        : c.frame && isPoint(c.frame) && only(c, ['frame', 'to', 'rotate', 'weight']) && turnable(c)
           ? loadedFrame(Object.assign({ kind: 'frame', point: c.frame, to: c.to || c.frame.slice(), turn: quaternionOf(c.rotate) }, weight(c)), c)
           : c.region && c.region.sphere && isPoint(c.region.sphere[0]) && c.region.sphere[1] > 0 && only(c, ['region', 'translate', 'rotate', 'weight'])
-            && (!c.translate || isPoint(c.translate)) && (!c.rotate || (isPoint(c.rotate.axis) && isFinite(c.rotate.degrees)))
+            && (!c.translate || isPoint(c.translate)) && turnable(c)
             ? loadedFrame(loadedRegion(c), c)
             : { kind: 'raw', entry: c };
     const loadedRegion = function (c) { // the motion about the pivot, as a turn about the centre and a target for it
@@ -759,9 +760,7 @@
     numbers.radius.max = (model.boundingSphere.radius * 0.8).toPrecision(3);
     numbers.radius.step = (model.boundingSphere.radius * 0.005).toPrecision(3);
     resize();
-    const centre = Viewer.frame(view, model.boundingBox, 30, 15, view.camera.aspect);
-    controls.target.copy(centre);
-    controls.update();
+    look(viewAngles[0], viewAngles[1]); // no handles yet: the model's box
     syncControls(); showSource();
     status.textContent = modelName + ': ' + facts.vertices + ' vertices, ' + facts.faces + ' faces; full result at resolution ' + fullResolution;
     frame();
