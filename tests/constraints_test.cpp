@@ -173,6 +173,66 @@ TEST(Constraints, DerivativeWeightsAreTheJacobian) {
     }
 }
 
+TEST(Constraints, SecondDerivativeWeightsAreTheMapsCurvature) {
+    // On the same jittered clamped lattice: the weights of the second derivative along two parameter directions
+    // against central differences of the Jacobian the lattice computes.
+    Lattice l = Lattice::clamped({7, 6, 8}, {-1, -2, -0.5}, {2, 1, 1.5});
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> jitter(-0.05, 0.05);
+    for (auto& p : l.points()) p += Eigen::Vector3d(jitter(rng), jitter(rng), jitter(rng));
+    for (const Eigen::Vector3d& stu : {Eigen::Vector3d(0.3, 1.7, 2.2), Eigen::Vector3d(3.6, 0.4, 4.5), Eigen::Vector3d(2.5, 2.5, 0.5)})
+        for (const auto& [a, b] : {std::pair{Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(1, 0, 0)}, std::pair{Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0, 1)},
+                                   std::pair{Eigen::Vector3d(0.3, -0.7, 0.5), Eigen::Vector3d(-0.2, 0.4, 0.9)}}) {
+            std::array<int, 3> region;
+            std::array<double, 64> w;
+            l.second_derivative_weights(stu, a, b, region, w);
+            Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 4; ++i) sum += w[std::size_t(i + 4 * (j + 4 * k))] * l.point(region[0] + i, region[1] + j, region[2] + k);
+            const double e = 1e-5;
+            const Eigen::Vector3d differences = (l.jacobian(stu + e * a) - l.jacobian(stu - e * a)) * b / (2 * e);
+            EXPECT_LE((sum - differences).norm(), 1e-6 * (1 + differences.norm())) << stu.transpose() << " | " << a.transpose() << " | " << b.transpose();
+        }
+}
+
+TEST(Constraints, BendRowsHoldAPlateFlatAsItTurns) {
+    // A frame's point, its turn and the three bends of a plate across (x, y): solved exactly, the solved map's
+    // second derivatives along the plate are zero (the rest map's, turned), while one across it is left free.
+    const Eigen::Vector3d P(0.5, 0.4, 1.1), Q(0.6, 0.2, 1.3);
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.6, Eigen::Vector3d(1, -2, 0.5).normalized()).toRotationMatrix();
+    std::vector<Constraint> cs{move(P, Q), move(Eigen::Vector3d(0.5, 0.4, 0.3), Eigen::Vector3d(0.9, 0.4, 0.3))};
+    const Eigen::Vector3d t1 = Eigen::Vector3d::UnitX(), t2 = Eigen::Vector3d::UnitY();
+    for (const auto& [a, b] : {std::pair{t1, t1}, std::pair{t1, t2}, std::pair{t2, t2}}) {
+        Constraint bend = cs[0];
+        bend.kind = ConstraintKind::bend, bend.direction = a, bend.across = b, bend.rotation = R;
+        cs.push_back(bend);
+    }
+    const ConstraintSolution s = solve_constraints(kRest, cs);
+    EXPECT_FALSE(s.least_squares);
+    for (double r : s.residuals) EXPECT_LE(r, 1e-10);
+    const Eigen::Vector3d stu = kRest.parameter_of(P);
+    const Eigen::Matrix3d to_parameter = kRest.jacobian(stu).inverse();
+    auto curvature = [&](const Lattice& l, const Eigen::Vector3d& a, const Eigen::Vector3d& b) { // world units (P sits on a knot)
+        std::array<int, 3> region;
+        std::array<double, 64> w;
+        l.second_derivative_weights(stu, to_parameter * a, to_parameter * b, region, w);
+        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+        for (int k = 0; k < 4; ++k)
+            for (int j = 0; j < 4; ++j)
+                for (int i = 0; i < 4; ++i) sum += w[std::size_t(i + 4 * (j + 4 * k))] * l.point(region[0] + i, region[1] + j, region[2] + k);
+        return sum;
+    };
+    for (const auto& [a, b] : {std::pair{t1, t1}, std::pair{t1, t2}, std::pair{t2, t2}})
+        EXPECT_LE((curvature(s.lattice, a, b) - R * curvature(kRest, a, b)).norm(), 1e-9);
+    // The second move, below P, bends the map across the plate: that curvature is not held.
+    EXPECT_GT(curvature(s.lattice, Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitZ()).norm(), 0.1);
+    // A plate is the deform's to expand (it needs the surface's tangent plane): handed to the solver it is refused.
+    Constraint plate = cs[0];
+    plate.kind = ConstraintKind::plate;
+    EXPECT_THROW(solve_constraints(kRest, {plate}), InvalidInput);
+}
+
 TEST(Constraints, FrameRowsTurnTheMapAndJoinRowsJoinPoints) {
     // A frame (a move and three turn rows) and a join, solved exactly: the solved map, evaluated on its own, takes
     // the frame's point to its target with the asked rotation as its Jacobian (in world units), and the two joined

@@ -41,7 +41,7 @@
   let lastFullPly = null, lastReport = null;
 
   const api = {
-    ready: false, resultVersion: 0, lastResolution: 0, requests: 0, errors: [],
+    ready: false, resultVersion: 0, lastResolution: 0, requests: 0, errors: [], notes: [],
     drag: { active: false, updates: 0, start: 0, seconds: 0 },
     state: state,
   };
@@ -231,6 +231,17 @@
         if (pending) { const r = pending; pending = 0; requestDeform(r); }
       });
   }
+  /// A handle that turns asks for a solve that turns the material with it: the least control-point motion shears
+  /// a turn instead (the box bent 90 degrees that way gains a third in volume). So an edit whose solver was not
+  /// chosen (in the panel or the loaded file) becomes rigid when one of its handles turns, and the status says so.
+  function turnedHandle(c) {
+    const turned = c && c.turn && Math.abs(c.turn[3]) < 1 - 1e-9;
+    if (!turned || state.current.solver !== 'min-norm' || state.current.solverChosen) return;
+    state.current.solver = 'rigid';
+    state.current.solverTurned = true;
+    document.getElementById('solver').value = 'rigid';
+    api.notes.push('solver rigid: a handle turns');
+  }
   function showError(message) {
     status.className = 'error';
     status.textContent = message;
@@ -239,7 +250,8 @@
   function showReport(report, resolution, ms) {
     status.className = '';
     status.textContent = 'resolution ' + resolution + ', ' + report.output_faces + ' faces, ' + Math.round(ms) + ' ms\n' +
-      'volume ' + (report.volume_change_percent >= 0 ? '+' : '') + report.volume_change_percent.toFixed(2) + ' %';
+      'volume ' + (report.volume_change_percent >= 0 ? '+' : '') + report.volume_change_percent.toFixed(2) + ' %' +
+      (state.current.solverTurned && state.current.solver === 'rigid' ? '\nsolver rigid: a handle turns (min-norm would shear it)' : '');
     (report.thin_parts || []).forEach(function (p) { // what the voxmap lost (README, "Reports")
       status.className = 'warning';
       status.textContent += '\n' + (p.stage === 'voxelize' ? 'voxelizing' : p.stage) + ' loses a part ' + p.thickness_voxels.toFixed(2) +
@@ -372,7 +384,7 @@
     const c = state.current.constraints[selected];
     if (!c || !c.to) return;
     c.to = gizmoTarget.position.toArray();
-    if (c.turn) c.turn = gizmoTarget.quaternion.toArray(); // frames and regions turn
+    if (c.turn) { c.turn = gizmoTarget.quaternion.toArray(); turnedHandle(c); } // frames and regions turn
     rebuildHandles();
     requestDeform(Math.max(16, Math.round(fullResolution / 2)));
   });
@@ -461,7 +473,10 @@
       if (!c || !numbers[field].value.trim()) return; // emptied: nothing typed yet
       const v = parseTriple(numbers[field].value);
       if (!v) { showError('expected three numbers, e.g. 1, 0.5, -2'); showSelected(); return; }
-      if (field === 'turn') c.turn = new THREE.Quaternion().setFromEuler(new THREE.Euler(...v.map(d => d * Math.PI / 180), 'XYZ')).toArray();
+      if (field === 'turn') {
+        c.turn = new THREE.Quaternion().setFromEuler(new THREE.Euler(...v.map(d => d * Math.PI / 180), 'XYZ')).toArray();
+        turnedHandle(c);
+      }
       else if (field === 'to') c.to = v;
       else { c.point = v; if (c.kind === 'pin') c.to = v.slice(); }
       commit(); rebuildHandles(); requestDeform(fullResolution);
@@ -559,7 +574,9 @@
   document.getElementById('delete').onclick = remove;
   document.getElementById('undo').onclick = undo;
   document.getElementById('redo').onclick = redo;
-  document.getElementById('solver').onchange = function (e) { state.current.solver = e.target.value; commit(); requestDeform(fullResolution); };
+  document.getElementById('solver').onchange = function (e) {
+    state.current.solver = e.target.value; state.current.solverChosen = true; commit(); requestDeform(fullResolution);
+  };
   document.getElementById('preserve-volume').onchange = function (e) { state.current.preserve_volume = e.target.checked; commit(); requestDeform(fullResolution); };
   function toggleBefore() { before = !before; showSource(); }
   /// The lattice's settings from the panel (empty fields: the defaults); the server checks their ranges.
@@ -672,7 +689,7 @@
       handle.pristine = JSON.stringify([handle.point, handle.to, handle.turn]);
       return handle;
     };
-    const toEdit = e => ({ solver: e.solver || 'min-norm', preserve_volume: !!e.preserve_volume, constraints: e.constraints.map(toConstraint) });
+    const toEdit = e => ({ solver: e.solver || 'min-norm', solverChosen: !!e.solver, preserve_volume: !!e.preserve_volume, constraints: e.constraints.map(toConstraint) });
     const previous = lastSnapshot;
     const fail = async function () { // the page as it was, then the message (after the result it shows again)
       const message = api.errors[api.errors.length - 1] || 'refused';

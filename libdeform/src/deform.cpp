@@ -37,6 +37,8 @@ std::string kind_name(ConstraintKind k) {
     case ConstraintKind::region: return "region";
     case ConstraintKind::normal: return "normal";
     case ConstraintKind::slide: return "slide";
+    case ConstraintKind::plate: return "plate";
+    case ConstraintKind::bend: return "bend";
     }
     return "?";
 }
@@ -51,9 +53,11 @@ using NearestSurface = std::function<std::pair<Eigen::Vector3d, Eigen::Vector3d>
 /// of up to kRegionPoints points of the material inside it (`material(shape)` lists candidates), spread by
 /// farthest-point sampling from the one nearest its middle, each carried by the region's rigid motion (or held, if
 /// it has none); a normal becomes two turns of the surface's tangents there by the least rotation from its normal
-/// to the asked direction; a slide a move of the surface point nearest to it. owner[r]: the constraint row r comes from.
+/// to the asked direction; a slide a move of the surface point nearest to it; a frame's plate three bends along the
+/// surface's tangent plane, when the surface passes within `plate_reach` (world units) of the frame's point.
+/// owner[r]: the constraint row r comes from.
 std::vector<Constraint> expand_entries(const std::vector<Constraint>& constraints, const std::function<std::vector<Eigen::Vector3d>(const RegionShape&)>& material,
-                                       const NearestSurface& nearest, std::vector<int>& owner) {
+                                       const NearestSurface& nearest, double plate_reach, std::vector<int>& owner) {
     std::vector<Constraint> rows;
     owner.clear();
     for (std::size_t c = 0; c < constraints.size(); ++c) {
@@ -72,6 +76,19 @@ std::vector<Constraint> expand_entries(const std::vector<Constraint>& constraint
             for (const Eigen::Vector3d& t : {t1, t2}) {
                 Constraint r = k;
                 r.kind = ConstraintKind::turn, r.point = r.to = k.point, r.direction = t, r.rotation = turn;
+                rows.push_back(r), owner.push_back(int(c));
+            }
+            continue;
+        }
+        if (k.kind == ConstraintKind::plate) {
+            // Flat and unstretched along the surface's tangent plane: the second derivatives there, (t1, t1),
+            // (t1, t2) and (t2, t2), turned with the frame. Only where the frame grips the surface.
+            const auto [on, normal] = nearest(k.point);
+            if (normal.isZero() || (on - k.point).norm() > plate_reach) continue;
+            const Eigen::Vector3d t1 = normal.unitOrthogonal(), t2 = normal.cross(t1);
+            for (const auto& [a, b] : {std::pair{t1, t1}, std::pair{t1, t2}, std::pair{t2, t2}}) {
+                Constraint r = k;
+                r.kind = ConstraintKind::bend, r.direction = a, r.across = b;
                 rows.push_back(r), owner.push_back(int(c));
             }
             continue;
@@ -168,12 +185,17 @@ void check_near(const std::vector<Constraint>& constraints, const Eigen::Vector3
 std::vector<Constraint> step_constraints(const std::vector<Constraint>& constraints, int s, int steps) {
     std::vector<Constraint> out = constraints;
     for (auto& c : out) {
-        if (c.kind == ConstraintKind::move || c.kind == ConstraintKind::turn) { // a frame's turn goes with its point
+        if (c.kind == ConstraintKind::move || c.kind == ConstraintKind::turn || c.kind == ConstraintKind::bend) { // a frame's rows go with its point
             const Eigen::Vector3d d = c.to - c.point;
             c.point = c.point + d * (double(s) / steps);
             c.to = c.point + d / steps;
-            if (c.kind == ConstraintKind::turn) {
+            if (c.kind != ConstraintKind::move) {
                 Eigen::AngleAxisd turn(c.rotation);
+                if (c.kind == ConstraintKind::bend) { // the plate, as the steps before this one have turned it
+                    Eigen::AngleAxisd before = turn;
+                    before.angle() *= double(s) / steps;
+                    c.direction = before * c.direction, c.across = before * c.across;
+                }
                 turn.angle() /= steps;
                 c.rotation = turn.toRotationMatrix();
             }
@@ -366,7 +388,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
         const Eigen::Vector3d lo = voxmap.origin(), hi = voxmap.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
         std::vector<int> owner;
-        const std::vector<Constraint> rows = expand_entries(constraints, material_of(voxmap), nearest_of(voxmap), owner);
+        const std::vector<Constraint> rows = expand_entries(constraints, material_of(voxmap), nearest_of(voxmap), 1.5 * h, owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;
@@ -547,7 +569,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         const std::vector<Constraint> rows = expand_entries(constraints, material_of(out), [&](const Eigen::Vector3d& p) {
             if (!surface) surface = std::make_unique<SourceSurface>(out);
             return nearest_on(*surface, p, kMissReach * frame.voxel_size);
-        }, owner);
+        }, 1.5 * frame.voxel_size, owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;

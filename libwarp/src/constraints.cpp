@@ -103,8 +103,8 @@ ConstraintRows constraint_rows(const Lattice& rest, const std::vector<Constraint
             out.hard[std::size_t(c)] = true;
             continue;
         }
-        if (k.kind == ConstraintKind::region || k.kind == ConstraintKind::normal || k.kind == ConstraintKind::slide)
-            throw InvalidInput(who + ": a region, normal or slide needs the model's surface: the deform turns it into rows, the solver takes none");
+        if (k.kind == ConstraintKind::region || k.kind == ConstraintKind::normal || k.kind == ConstraintKind::slide || k.kind == ConstraintKind::plate)
+            throw InvalidInput(who + ": a region, normal, slide or frame's plate needs the model's surface: the deform turns it into rows, the solver takes none");
         if (!k.point.allFinite() || !k.to.allFinite()) throw InvalidInput(who + ": point or target is not finite");
         // The parameter of a world point in the rest lattice, inside its closed domain.
         auto parameter = [&](const Eigen::Vector3d& point) {
@@ -143,6 +143,23 @@ ConstraintRows constraint_rows(const Lattice& rest, const std::vector<Constraint
             rest.derivative_weights(stu, rest.jacobian(stu).inverse() * k.direction, region, w);
             add_terms(region, w, length);
             out.D.row(c) = (length * (k.rotation * k.direction - k.direction)).transpose();
+            continue;
+        }
+        if (k.kind == ConstraintKind::bend) {
+            // Scaled by a spacing squared, so that it weighs like a point row across one cell. The rest map's own
+            // second derivative (zero but for a clamped lattice's ends) is turned with the rest.
+            if (!k.direction.allFinite() || std::abs(k.direction.norm() - 1) > 1e-9 || !k.across.allFinite() || std::abs(k.across.norm() - 1) > 1e-9 ||
+                !k.rotation.allFinite())
+                throw InvalidInput(who + ": a bend needs two unit directions and a finite rotation");
+            const double length = rest.spacing().mean();
+            const Eigen::Matrix3d inverse = rest.jacobian(stu).inverse();
+            rest.second_derivative_weights(stu, inverse * k.direction, inverse * k.across, region, w);
+            add_terms(region, w, length * length);
+            Eigen::Vector3d undeformed = Eigen::Vector3d::Zero();
+            for (int kk = 0; kk < 4; ++kk)
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 4; ++i) undeformed += w[std::size_t(i + 4 * (j + 4 * kk))] * rest.point(region[0] + i, region[1] + j, region[2] + kk);
+            out.D.row(c) = (length * length * (k.rotation - Eigen::Matrix3d::Identity()) * undeformed).transpose();
             continue;
         }
         rest.weights(stu, region, w);

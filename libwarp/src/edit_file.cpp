@@ -111,7 +111,7 @@ Eigen::Matrix3d parse_rotation(const Context& ctx, const json& v, const std::str
     return Eigen::AngleAxisd(degrees * M_PI / 180, axis.normalized()).toRotationMatrix();
 }
 
-/// One entry of an edit's constraints, as the rows the solve takes (a frame is four, a connect with "at" two).
+/// One entry of an edit's constraints, as the rows the solve takes (a frame is five, a connect with "at" two).
 void parse_constraint(const Context& ctx, const json& v, const std::string& path, std::vector<Constraint>& out) {
     if (!v.is_object()) ctx.fail(path, "expected an object, got " + describe(v));
     Constraint c;
@@ -142,8 +142,8 @@ void parse_constraint(const Context& ctx, const json& v, const std::string& path
         for (int a = 0; a < 3; ++a) c.control_point[std::size_t(a)] = integer(ctx, idx[std::size_t(a)], path + ".control_point[" + std::to_string(a) + "]");
         c.offset = point3(ctx, require(ctx, v, path, "offset"), path + ".offset");
     } else if (v.contains("frame")) {
-        // P goes to Q (default: stays) and the map's Jacobian at P becomes the rotation (default: none): a move
-        // and the derivative along each axis.
+        // P goes to Q (default: stays) and the map's Jacobian at P becomes the rotation (default: none): a move,
+        // the derivative along each axis, and the plate.
         only_keys(ctx, v, path, {"frame", "to", "rotate", "weight"});
         c.kind = ConstraintKind::move;
         c.entry = "frame";
@@ -157,6 +157,11 @@ void parse_constraint(const Context& ctx, const json& v, const std::string& path
             t.rotation = rotation;
             rows.push_back(t);
         }
+        // And the surface it grips turns with it as a plate (the deform finds the surface).
+        Constraint plate = c;
+        plate.kind = ConstraintKind::plate;
+        plate.rotation = rotation;
+        rows.push_back(plate);
     } else if (v.contains("region")) {
         only_keys(ctx, v, path, {"region", "translate", "rotate", "weight"});
         c.kind = ConstraintKind::region;

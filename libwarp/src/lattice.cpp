@@ -41,12 +41,13 @@ using AxisBasis = std::array<std::array<double, 4>, 3>; // per axis, the four ba
 /// Per axis: the region holding stu, the basis values at its local parameter and, when `slopes` is given, their
 /// derivatives.
 inline void basis_at(const std::array<int, 3>& size, const Eigen::Vector3d& stu, std::array<int, 3>& region, AxisBasis& values,
-                     AxisBasis* slopes = nullptr) {
+                     AxisBasis* slopes = nullptr, AxisBasis* curvatures = nullptr) {
     for (int a = 0; a < 3; ++a) {
         double t;
         region[std::size_t(a)] = region_of(stu[a], size[std::size_t(a)] - 3, t);
         values[std::size_t(a)] = cubic_basis(t);
         if (slopes) (*slopes)[std::size_t(a)] = cubic_basis_derivative(t);
+        if (curvatures) (*curvatures)[std::size_t(a)] = cubic_basis_second_derivative(t);
     }
 }
 
@@ -108,6 +109,31 @@ void Lattice::derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector
                 const std::size_t I = std::size_t(i), J = std::size_t(j), K = std::size_t(k);
                 w[I + 4 * (J + 4 * K)] = dstu.x() * d[0][I] * b[1][J] * b[2][K] + dstu.y() * b[0][I] * d[1][J] * b[2][K] + dstu.z() * b[0][I] * b[1][J] * d[2][K];
             }
+}
+
+void Lattice::second_derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector3d& a, const Eigen::Vector3d& b, std::array<int, 3>& region,
+                                        std::array<double, 64>& w) const {
+    AxisBasis value, slope, curvature;
+    basis_at(size_, stu, region, value, &slope, &curvature);
+    // d^2/dp dq of B_i(s) B_j(t) B_k(u): the factor of each axis is its value, slope (once differentiated) or
+    // curvature (twice), by how many of p and q name that axis.
+    Eigen::Matrix3d pair = a * b.transpose();
+    pair = (pair + pair.transpose()).eval() / 2;
+    w.fill(0.0);
+    for (int p = 0; p < 3; ++p)
+        for (int q = 0; q < 3; ++q) {
+            if (pair(p, q) == 0) continue;
+            std::array<const std::array<double, 4>*, 3> factor{&value[0], &value[1], &value[2]};
+            for (int axis = 0; axis < 3; ++axis) {
+                const int order = int(p == axis) + int(q == axis);
+                if (order == 1) factor[std::size_t(axis)] = &slope[std::size_t(axis)];
+                if (order == 2) factor[std::size_t(axis)] = &curvature[std::size_t(axis)];
+            }
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 4; ++i)
+                        w[std::size_t(i + 4 * (j + 4 * k))] += pair(p, q) * (*factor[0])[std::size_t(i)] * (*factor[1])[std::size_t(j)] * (*factor[2])[std::size_t(k)];
+        }
 }
 
 Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {

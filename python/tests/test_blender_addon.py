@@ -59,7 +59,8 @@ def test_box_bent_by_two_handles_lands_on_the_arc(tmp):
           f"mean {coarse['mean']:.3f} p99 {coarse['p99']:.3f} max {coarse['max']:.3f}; Simple Deform subdivided ({fine['triangles']}) mean "
           f"{fine['mean']:.4f} max {fine['max']:.4f}; {f['seconds']:.2f} s")
     assert f["handles"] == 2
-    # The bar is 1 voxel mean; measured 0.100 mean, 0.92 max, +1.38 % volume (two frames, lattice 9 x 5 x 5).
+    # The bar is 1 voxel mean; measured 0.165 mean, 0.99 max, +1.49 % volume (two frames, lattice 9 x 5 x 5;
+    # before the frames gripped the end faces as plates, 0.100 / 0.92 / +1.38 %).
     assert v["mean"] <= 0.2 and v["max"] <= 1.9 and abs(v["volume_change_percent"]) <= 2.0, v
     # Simple Deform puts each vertex on the same analytic map (so its subdivided box lies on the arc: this checks
     # that the arc is placed where both tools bend to), and the coarse box's flat faces far off it.

@@ -62,6 +62,48 @@ def test_a_frame_bend_in_five_actions_saves_what_the_cli_deforms(box_page, tmp_p
     r = run_cli("deform", data("box.obj"), tmp_path / "edit.json", "-o", tmp_path / "cli.ply", "-r", 48, "-q")
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "cli.ply").read_bytes() == shown
+    # A turned handle made the edit rigid, and the bend lands where the handles issue asks: within mean 0.5 and max
+    # 2 voxels (the editor's, 1/12) of the analytic arc, volume within 2 %.
+    assert edit["edits"][0]["solver"] == "rigid" and "solver rigid: a handle turns" in driver.execute_script("return window.voxwarp.notes")
+    bent_box_obj(tmp_path / "arc.obj")
+    r = run_cli("compare", tmp_path / "cli.ply", tmp_path / "arc.obj", "--voxel", 1 / 12, "--json")
+    assert r.returncode == 0, r.stderr
+    facts = json.loads(r.stdout)
+    distance = facts["distance"]["symmetric"]["voxels"]
+    print("editor bend against the arc: mean %.3f, max %.3f voxels, volume %+.2f %%" % (distance["mean"], distance["max"], 100 * (facts["a"]["enclosed_volume"] / 4 - 1)))
+    assert distance["mean"] <= 0.5 and distance["max"] <= 2, distance
+    assert abs(facts["a"]["enclosed_volume"] / 4 - 1) <= 0.02 and facts["a"]["closed"] and facts["a"]["components"] == 1
+
+
+def bent_box_obj(path, n=40, length=4.0, width=1.0):
+    """The length x width x width box bent 90 degrees into a circular arc in the x-y plane, towards +y: its centre
+    line keeps its length, its cross-sections stay planar and square to it, the end x = -length/2 stays put.
+    n quads per unit along each face (open at the box's edges: a distance reference, not a solid)."""
+    R = length / (math.pi / 2)
+
+    def bend(p):
+        x, y, z = p
+        t = (x + length / 2) / R
+        return (-length / 2 + (R - y) * math.sin(t), R - (R - y) * math.cos(t), z)
+    lo, hi = (-length / 2, -width / 2, -width / 2), (length / 2, width / 2, width / 2)
+    verts, faces = [], []
+    for axis in range(3):
+        u, v = [a for a in range(3) if a != axis]
+        nu, nv = max(1, round(n * (hi[u] - lo[u]))), max(1, round(n * (hi[v] - lo[v])))
+        for side in (lo[axis], hi[axis]):
+            base = len(verts)
+            for i in range(nu + 1):
+                for j in range(nv + 1):
+                    p = [0.0, 0.0, 0.0]
+                    p[axis], p[u], p[v] = side, lo[u] + (hi[u] - lo[u]) * i / nu, lo[v] + (hi[v] - lo[v]) * j / nv
+                    verts.append(bend(p))
+            for i in range(nu):
+                for j in range(nv):
+                    a, b = base + i * (nv + 1) + j, base + (i + 1) * (nv + 1) + j
+                    faces += [(a, b, b + 1), (a, b + 1, a + 1)]
+    with open(path, "w") as f:
+        f.writelines("v %.9f %.9f %.9f\n" % q for q in verts)
+        f.writelines("f %d %d %d\n" % (a + 1, b + 1, c + 1) for a, b, c in faces)
 
 
 def test_view_presets_look_along_the_axes(box_page):  # noqa: F811

@@ -22,6 +22,9 @@ inline std::array<double, 4> cubic_basis_derivative(double t) {
     return {-0.5 * u * u, (9 * t2 - 12 * t) / 6.0, (-9 * t2 + 6 * t + 3) / 6.0, 0.5 * t2};
 }
 
+/// The four basis second derivatives d^2/dt^2 at t.
+inline std::array<double, 4> cubic_basis_second_derivative(double t) { return {1.0 - t, 3 * t - 2, 1.0 - 3 * t, t}; }
+
 /// Basis values tabulated at the G fractional parameters e/G, e = 0..G-1 (the paper's section 4 table,
 /// kept per axis: the tensor-product map is separable, so 3 x G x 4 numbers replace G^3 x 64).
 /// Entry [e][i] = B_i(e / G). Entry [G][i] = B_i(1) serves the closed end of the parameter interval.

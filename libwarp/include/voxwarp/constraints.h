@@ -35,6 +35,11 @@ enum class ConstraintKind {
                    ///< turns of the surface's tangents by the least rotation from its normal there to `direction`
     slide,         ///< the surface passes through `to` (= `point`): expanded by the deform into a move of the surface
                    ///< point nearest to it
+    plate,         ///< a frame's grip on the surface: the surface around `point` turns with `rotation` as a rigid plate
+                   ///< (stays flat and unstretched). Expanded by the deform into three bends along the surface's
+                   ///< tangent plane there; into none when no surface lies within a voxel and a half of the point
+    bend,          ///< the map's second derivative at `point` along the world unit vectors `direction` and `across`
+                   ///< becomes `rotation` times the undeformed one (`to`: its point's target, for split edits)
 };
 
 /// The shape of a region constraint: a sphere (centre, radius) or an axis-aligned box (lo, hi), world units.
@@ -53,13 +58,14 @@ struct Constraint {
     Eigen::Vector3d to = Eigen::Vector3d::Zero();     ///< move: target world point
     std::array<int, 3> control_point{0, 0, 0};        ///< control_point: lattice index (i, j, k)
     Eigen::Vector3d offset = Eigen::Vector3d::Zero(); ///< control_point: world displacement
-    Eigen::Vector3d direction = Eigen::Vector3d::UnitX();     ///< turn: world unit vector
-    Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();   ///< turn, region: the rotation
+    Eigen::Vector3d direction = Eigen::Vector3d::UnitX();     ///< turn, bend: world unit vector
+    Eigen::Vector3d across = Eigen::Vector3d::UnitY();        ///< bend: the second world unit vector
+    Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();   ///< turn, region, plate, bend: the rotation
     Eigen::Vector3d pivot = Eigen::Vector3d::Zero();          ///< region: the rotation's fixed point (offset: the translation)
     RegionShape region;                                       ///< region: where
     std::optional<double> weight;                     ///< explicit weight (> 0): the set is solved as weighted least squares
     std::string name;                                 ///< where it came from, for messages (e.g. "edits[0].constraints[2]")
-    /// The edit file's entry when it became several rows ("frame": a move and three turns; "region": moves;
+    /// The edit file's entry when it became several rows ("frame": a move, three turns and a plate; "region": moves;
     /// "connect" with "at": two moves); empty otherwise. Rows of one entry share its name.
     std::string entry;
 };
