@@ -184,7 +184,7 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
             TriangleMesh mesh = read_mesh(a->mesh);
             // The page shows and saves geometry only: carrying texture coordinates and materials through every
             // drag preview would cost each one a source search for nothing.
-            mesh.uvs.clear(), mesh.triangle_uvs.clear(), mesh.colours.clear(), mesh.triangle_materials.clear(), mesh.materials.clear();
+            mesh.uvs.clear(), mesh.triangle_uvs.clear(), mesh.colours.clear(), mesh.triangle_materials.clear(), mesh.materials.clear(), mesh.triangle_groups.clear(), mesh.groups.clear();
             std::string initial_edit;
             if (!a->edits.empty()) {
                 read_edit_file(a->edits); // refused here, with the file's name, rather than in the page

@@ -206,7 +206,8 @@ py::tuple arrays_from_mesh(TriangleMesh&& mesh) {
 
 /// A mesh's attributes as a dict of numpy arrays (the keys it has): "uv" float64 (k, 2), "uv_index" int32 (m, 3)
 /// (each triangle's corners' rows of uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,)
-/// (index into "materials", -1: none), "materials": a list of dicts (name, diffuse, texture, statements).
+/// (index into "materials", -1: none), "materials": a list of dicts (name, diffuse, texture, statements), "group" int32
+/// (m,) (index into "groups", -1: none), "groups": a list of names (OBJ's g and o).
 py::dict attributes_dict(TriangleMesh& mesh) {
     static_assert(sizeof(Eigen::Vector2d) == 2 * sizeof(double) && sizeof(Eigen::Vector3f) == 3 * sizeof(float));
     py::dict a;
@@ -221,6 +222,10 @@ py::dict attributes_dict(TriangleMesh& mesh) {
         materials.append(py::dict(py::arg("name") = m.name, py::arg("diffuse") = py::make_tuple(m.diffuse.x(), m.diffuse.y(), m.diffuse.z()),
                                   py::arg("texture") = m.texture, py::arg("statements") = m.statements));
     if (!mesh.materials.empty()) a["materials"] = materials;
+    if (!mesh.triangle_groups.empty()) {
+        a["group"] = adopt<std::int32_t>(std::move(mesh.triangle_groups), 1).attr("reshape")(-1);
+        a["groups"] = py::cast(mesh.groups);
+    }
     return a;
 }
 
@@ -250,6 +255,12 @@ void attributes_from(const py::handle& attributes, TriangleMesh& mesh) {
     if (a.contains("material")) {
         const auto m = rows("material", 0, std::int32_t{});
         for (py::ssize_t i = 0; i < m.shape(0); ++i) mesh.triangle_materials.push_back(m.at(i));
+    }
+    if (a.contains("group") != a.contains("groups")) throw InvalidInput("attributes: \"group\" and \"groups\" go together");
+    if (a.contains("group")) {
+        const auto g = rows("group", 0, std::int32_t{});
+        for (py::ssize_t i = 0; i < g.shape(0); ++i) mesh.triangle_groups.push_back(g.at(i));
+        mesh.groups = a["groups"].cast<std::vector<std::string>>();
     }
     if (a.contains("materials"))
         for (const auto& item : a["materials"]) {
@@ -344,7 +355,7 @@ void define_module(py::module_& m) {
         },
         py::arg("path"), py::kw_only(), py::arg("attributes") = false,
         "Read a mesh file (.obj .off .ply .stl .om .gltf .glb) as (V, F): float64 (n, 3) world positions, int32 (m, 3) triangles;\n"
-        "with attributes=True, (V, F, attributes): texture coordinates, colours and materials as a dict of arrays. A missing\n"
+        "with attributes=True, (V, F, attributes): texture coordinates, colours, materials and groups as a dict of arrays. A missing\n"
         ".mtl or texture is a UserWarning.");
     m.def(
         "write_mesh",

@@ -279,6 +279,72 @@ TEST(Attributes, ObjKeepsTextureCoordinatesMaterialsAndColours) {
     EXPECT_EQ(moved.triangle_materials, box.triangle_materials);
 }
 
+TEST(Attributes, ObjGroupsAreReadWrittenAndCarriedThroughARemesh) {
+    // A cube whose sides are OBJ groups (one named by "o", one with a space in its name, one face in none).
+    const fs::path dir = scratch("groups");
+    const char* sides[6] = {"left", "right", "bottom", "top", "back", "front lid"};
+    TriangleMesh cube = test::box_mesh(Eigen::Vector3d::Constant(-1), Eigen::Vector3d::Constant(1), 4);
+    auto side_of = [](const Eigen::Vector3d& p) { // which side a point of the cube's surface is nearest: 2 axis + (sign > 0)
+        int axis = 0;
+        for (int a = 1; a < 3; ++a)
+            if (std::abs(p[a]) > std::abs(p[axis])) axis = a;
+        return 2 * axis + int(p[axis] > 0);
+    };
+    auto centroid = [](const TriangleMesh& m, std::size_t t) {
+        return Eigen::Vector3d((m.vertices[std::size_t(m.triangles[t][0])] + m.vertices[std::size_t(m.triangles[t][1])] + m.vertices[std::size_t(m.triangles[t][2])]) / 3);
+    };
+    std::string text;
+    for (const auto& v : cube.vertices) text += "v " + std::to_string(v.x()) + " " + std::to_string(v.y()) + " " + std::to_string(v.z()) + "\n";
+    std::vector<std::size_t> order(cube.triangles.size());
+    for (std::size_t t = 0; t < order.size(); ++t) order[t] = t;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return side_of(centroid(cube, a)) < side_of(centroid(cube, b)); });
+    int current = -1;
+    for (const std::size_t t : order) {
+        const int side = side_of(centroid(cube, t));
+        if (side != current) text += std::string(side == 1 ? "o " : "g ") + sides[side] + "\n", current = side;
+        const auto& f = cube.triangles[t];
+        text += "f " + std::to_string(f[0] + 1) + " " + std::to_string(f[1] + 1) + " " + std::to_string(f[2] + 1) + "\n";
+    }
+    text += "g\nf 1 2 3\n"; // after a bare "g": in no group (a sliver, overlapping the first face)
+    write_text(dir / "cube.obj", text);
+    const TriangleMesh read = read_mesh((dir / "cube.obj").string());
+    ASSERT_EQ(read.groups, std::vector<std::string>(sides, sides + 6));
+    ASSERT_EQ(read.triangle_groups.size(), read.triangles.size());
+    for (std::size_t t = 0; t + 1 < read.triangles.size(); ++t) EXPECT_EQ(read.triangle_groups[t], side_of(centroid(read, t))) << t;
+    EXPECT_EQ(read.triangle_groups.back(), -1);
+    // Written and read back: the same groups, face for face.
+    write_mesh(read, (dir / "again.obj").string());
+    const TriangleMesh again = read_mesh((dir / "again.obj").string());
+    EXPECT_EQ(again.groups, read.groups);
+    EXPECT_EQ(again.triangle_groups, read.triangle_groups);
+
+    // Remeshed at 32 (without the sliver): every output triangle in one group, the group of the side it lies on;
+    // within a voxel of the cube's edges and corners, where the split along the pushed-forward group boundary
+    // leaves thin triangles, of one of the sides there.
+    TriangleMesh solid = read;
+    solid.triangles.pop_back(), solid.triangle_groups.pop_back();
+    DeformOptions options;
+    options.voxelize.resolution = 32;
+    DeformReport report;
+    const TriangleMesh out = deform_mesh(solid, EditScript{}, options, report);
+    ASSERT_EQ(out.groups, read.groups);
+    ASSERT_EQ(out.triangle_groups.size(), out.triangles.size());
+    const double h = report.voxel_size;
+    std::size_t wrong = 0, near_edges = 0;
+    for (std::size_t t = 0; t < out.triangles.size(); ++t) {
+        const Eigen::Vector3d c = centroid(out, t);
+        const double farthest = c.cwiseAbs().maxCoeff();
+        int sides_near = 0;
+        bool one_of_them = false;
+        for (int k = 0; k < 3; ++k)
+            if (std::abs(c[k]) > farthest - h) ++sides_near, one_of_them = one_of_them || out.triangle_groups[t] == 2 * k + int(c[k] > 0);
+        near_edges += sides_near > 1;
+        wrong += !one_of_them;
+    }
+    std::printf("cube remeshed at 32: %zu triangles (%zu within a voxel of an edge), %zu in another group\n", out.triangles.size(), near_edges, wrong);
+    EXPECT_EQ(wrong, 0u);
+}
+
 TEST(Attributes, PlyKeepsColoursAndTextureCoordinatesSplitAtSeams) {
     const fs::path dir = scratch("ply");
     const TriangleMesh box = textured_box();

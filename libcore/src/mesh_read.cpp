@@ -77,10 +77,14 @@ std::string read_whole(const std::string& path, std::uintmax_t size) {
     return text;
 }
 
-/// Texture coordinate and material indices of an OBJ's faces, kept only once a face names one.
+/// Texture coordinate, material and group indices of an OBJ's faces, kept only once a face names one.
 struct ObjAttributes {
     std::vector<std::array<std::int32_t, 3>>& triangle_uvs;
     std::vector<std::int32_t>& triangle_materials;
+    std::vector<std::int32_t>& triangle_groups;
+    void groups_for(std::size_t triangles) {
+        if (triangle_groups.size() < triangles) triangle_groups.resize(triangles, -1);
+    }
     void uvs_for(std::size_t triangles) {
         if (triangle_uvs.size() < triangles) triangle_uvs.resize(triangles, {-1, -1, -1});
     }
@@ -91,12 +95,13 @@ struct ObjAttributes {
 
 TriangleMesh read_obj(const std::string& path, std::string_view text, std::vector<std::string>& libraries) {
     TriangleMesh mesh;
-    ObjAttributes attributes{mesh.triangle_uvs, mesh.triangle_materials};
+    ObjAttributes attributes{mesh.triangle_uvs, mesh.triangle_materials, mesh.triangle_groups};
     Lines lines(text);
     std::string_view line;
     std::int64_t max_index = 0, max_uv = 0;
     std::size_t max_index_line = 0, max_uv_line = 0;
-    std::int32_t material = -1;
+    std::int32_t material = -1, group = -1;
+    std::unordered_map<std::string, std::int32_t> group_ids;
     std::unordered_map<std::string, std::int32_t> material_ids;
     std::vector<std::int32_t> polygon, polygon_uvs;
     auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(lines.number()) + ": " + what); };
@@ -160,6 +165,10 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
                     attributes.materials_for(mesh.triangles.size());
                     mesh.triangle_materials.back() = material;
                 }
+                if (group >= 0) {
+                    attributes.groups_for(mesh.triangles.size());
+                    mesh.triangle_groups.back() = group;
+                }
             }
         } else if (keyword == "usemtl") {
             // The rest of the line, as newmtl's name in the library is read (names may hold spaces).
@@ -169,6 +178,18 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
             const auto [it, added] = material_ids.try_emplace(name, std::int32_t(mesh.materials.size()));
             if (added) mesh.materials.push_back(Material{name});
             material = it->second;
+        } else if (keyword == "g" || keyword == "o") {
+            // The faces after it belong to the group (or object) the rest of the line names; "g" alone: to none.
+            while (!line.empty() && space(line.front())) line.remove_prefix(1);
+            while (!line.empty() && space(line.back())) line.remove_suffix(1);
+            if (line.empty()) {
+                group = -1;
+                continue;
+            }
+            std::string name(line);
+            const auto [it, added] = group_ids.try_emplace(name, std::int32_t(mesh.groups.size()));
+            if (added) mesh.groups.push_back(name);
+            group = it->second;
         } else if (keyword == "mtllib") {
             for (std::string_view t = token(line); !t.empty(); t = token(line)) libraries.emplace_back(t);
         }
@@ -182,6 +203,8 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
     if (!mesh.colours.empty()) mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
     if (!mesh.triangle_uvs.empty()) attributes.uvs_for(mesh.triangles.size());
     if (!mesh.triangle_materials.empty()) attributes.materials_for(mesh.triangles.size());
+    if (!mesh.triangle_groups.empty()) attributes.groups_for(mesh.triangles.size());
+    else mesh.groups.clear(); // named, but no face after it
     if (mesh.triangle_uvs.empty()) mesh.uvs.clear();
     return mesh;
 }

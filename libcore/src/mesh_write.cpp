@@ -137,7 +137,7 @@ Chunks obj(const TriangleMesh& mesh, const std::string& material_library) {
             }
         });
     }
-    if (mesh.triangle_uvs.empty() && mesh.triangle_materials.empty()) {
+    if (mesh.triangle_uvs.empty() && mesh.triangle_materials.empty() && mesh.triangle_groups.empty()) {
         faces_text(mesh.triangles, "f ", 1, chunks);
     } else {
         encode_chunks(mesh.uvs.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
@@ -147,11 +147,19 @@ Chunks obj(const TriangleMesh& mesh, const std::string& material_library) {
             }
         });
         auto material = [&](std::size_t f) { return mesh.triangle_materials.empty() ? -1 : mesh.triangle_materials[f]; };
+        auto group = [&](std::size_t f) { return mesh.triangle_groups.empty() ? -1 : mesh.triangle_groups[f]; };
         std::size_t longest_name = 0;
         for (const auto& m : mesh.materials) longest_name = std::max(longest_name, m.name.size());
+        for (const auto& g : mesh.groups) longest_name = std::max(longest_name, g.size());
         encode_chunks(mesh.triangles.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
-            TextChunk t(s, (e - b) * (2 + 3 * 24 + 8 + longest_name + 1));
+            TextChunk t(s, (e - b) * (2 + 3 * 24 + 2 * (8 + longest_name + 1)));
             for (std::size_t f = b; f < e; ++f) {
+                // A group statement where the group changes ("g" alone where a face has none after one that had).
+                if (f == 0 ? group(f) >= 0 : group(f) != group(f - 1)) {
+                    t.text("g");
+                    if (group(f) >= 0) t.put(' '), t.text(mesh.groups[std::size_t(group(f))]);
+                    t.put('\n');
+                }
                 // A material statement where the material changes, and before the first face that has one.
                 if (material(f) >= 0 && (f == 0 || material(f) != material(f - 1)))
                     t.text("usemtl "), t.text(mesh.materials[std::size_t(material(f))].name), t.put('\n');

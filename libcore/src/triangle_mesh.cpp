@@ -16,6 +16,7 @@ void check_attributes(const TriangleMesh& mesh, const std::string& source) {
     };
     sized(mesh.triangle_uvs.size(), nt, "triangle_uvs", "triangle");
     sized(mesh.triangle_materials.size(), nt, "triangle_materials", "triangle");
+    sized(mesh.triangle_groups.size(), nt, "triangle_groups", "triangle");
     sized(mesh.colours.size(), mesh.vertices.size(), "colours", "vertex");
     if (mesh.has_attributes() && !mesh.quads.empty()) throw InvalidInput(source + ": a mesh with quads carries no attributes; triangulate it first");
     for (std::size_t i = 0; i < mesh.uvs.size(); ++i)
@@ -29,6 +30,10 @@ void check_attributes(const TriangleMesh& mesh, const std::string& source) {
         if (mesh.triangle_materials[t] < -1 || mesh.triangle_materials[t] >= std::int64_t(mesh.materials.size()))
             throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to material " + std::to_string(mesh.triangle_materials[t]) + ", the mesh has " +
                                std::to_string(mesh.materials.size()));
+    for (std::size_t t = 0; t < mesh.triangle_groups.size(); ++t)
+        if (mesh.triangle_groups[t] < -1 || mesh.triangle_groups[t] >= std::int64_t(mesh.groups.size()))
+            throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to group " + std::to_string(mesh.triangle_groups[t]) + ", the mesh has " +
+                               std::to_string(mesh.groups.size()));
     for (std::size_t i = 0; i < mesh.colours.size(); ++i)
         if (!mesh.colours[i].allFinite()) throw InvalidInput(source + ": colour of vertex " + std::to_string(i) + " is not finite");
 }
@@ -74,6 +79,7 @@ TriangleMesh TriangleMesh::triangulated() const {
     out.uvs = uvs;
     out.colours = colours;
     out.materials = materials;
+    out.groups = groups;
     if (!triangle_uvs.empty()) {
         out.triangle_uvs = triangle_uvs;
         out.triangle_uvs.resize(out.triangles.size(), {-1, -1, -1});
@@ -81,6 +87,10 @@ TriangleMesh TriangleMesh::triangulated() const {
     if (!triangle_materials.empty()) {
         out.triangle_materials = triangle_materials;
         out.triangle_materials.resize(out.triangles.size(), -1);
+    }
+    if (!triangle_groups.empty()) {
+        out.triangle_groups = triangle_groups;
+        out.triangle_groups.resize(out.triangles.size(), -1);
     }
     return out;
 }

@@ -14,14 +14,15 @@ namespace voxwarp {
 
 namespace {
 
-/// Charts of the input: triangles joined across each edge whose two sides have the same material and the same
-/// texture coordinates at both ends (or none on both sides).
+/// Charts of the input: triangles joined across each edge whose two sides have the same material, the same group
+/// and the same texture coordinates at both ends (or none on both sides).
 std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
     const auto& tris = input.triangles;
     const bool uvs = !input.triangle_uvs.empty(), materials = !input.triangle_materials.empty();
     auto uv = [&](std::size_t t, std::size_t c) { return uvs ? input.triangle_uvs[t][c] : -1; };
     auto same_uv = [&](std::int32_t a, std::int32_t b) { return a == b || (a >= 0 && b >= 0 && input.uvs[std::size_t(a)] == input.uvs[std::size_t(b)]); };
     auto material = [&](std::size_t t) { return materials ? input.triangle_materials[t] : -1; };
+    auto group = [&](std::size_t t) { return input.triangle_groups.empty() ? -1 : input.triangle_groups[t]; };
     internal::DisjointSets sets(tris.size());
     struct Side { // the first triangle seen on an edge, and its texture coordinates at the edge's lower and higher vertex
         std::size_t triangle;
@@ -37,7 +38,7 @@ std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
             const std::uint64_t key = (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
             const auto [it, added] = first.try_emplace(key, Side{t, ua, ub});
             const Side& s = it->second;
-            if (!added && material(s.triangle) == material(t) && same_uv(s.uv_low, ua) && same_uv(s.uv_high, ub)) sets.join(t, s.triangle);
+            if (!added && material(s.triangle) == material(t) && group(s.triangle) == group(t) && same_uv(s.uv_low, ua) && same_uv(s.uv_high, ub)) sets.join(t, s.triangle);
         }
     std::vector<std::int32_t> chart(tris.size());
     std::unordered_map<std::size_t, std::int32_t> ids;
@@ -65,8 +66,9 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     if (sources.size() != output.vertices.size())
         throw InvalidInput("transfer_attributes: " + std::to_string(sources.size()) + " sources for " + std::to_string(output.vertices.size()) + " vertices");
     TransferReport report;
-    output.uvs.clear(), output.triangle_uvs.clear(), output.colours.clear(), output.triangle_materials.clear();
+    output.uvs.clear(), output.triangle_uvs.clear(), output.colours.clear(), output.triangle_materials.clear(), output.triangle_groups.clear();
     output.materials = input.materials;
+    output.groups = input.groups;
     if (!input.has_attributes()) return report;
     const auto& in_tris = input.triangles;
     const auto& V = input.vertices;
@@ -104,10 +106,14 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     };
 
     const std::vector<std::int32_t> chart = charts_of(input);
-    std::vector<std::int32_t> chart_material;
+    std::vector<std::int32_t> chart_material, chart_group; // one material and one group per chart
     if (!input.triangle_materials.empty()) {
         chart_material.assign(in_tris.size(), -1);
         for (std::size_t t = 0; t < in_tris.size(); ++t) chart_material[std::size_t(chart[t])] = input.triangle_materials[t];
+    }
+    if (!input.triangle_groups.empty()) {
+        chart_group.assign(in_tris.size(), -1);
+        for (std::size_t t = 0; t < in_tris.size(); ++t) chart_group[std::size_t(chart[t])] = input.triangle_groups[t];
     }
 
     // Each vertex's source point seen from every chart it touches: its own face's, and, where the point lies on an
@@ -315,6 +321,10 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     if (!input.triangle_materials.empty()) {
         output.triangle_materials.resize(pieces.size());
         for (std::size_t f = 0; f < pieces.size(); ++f) output.triangle_materials[f] = pieces[f].chart >= 0 ? chart_material[std::size_t(pieces[f].chart)] : -1;
+    }
+    if (!input.triangle_groups.empty()) {
+        output.triangle_groups.resize(pieces.size());
+        for (std::size_t f = 0; f < pieces.size(); ++f) output.triangle_groups[f] = pieces[f].chart >= 0 ? chart_group[std::size_t(pieces[f].chart)] : -1;
     }
     if (!input.triangle_uvs.empty()) {
         output.triangle_uvs.assign(pieces.size(), {-1, -1, -1});

@@ -316,3 +316,26 @@ def test_attributes_come_through_deform_and_files_as_arrays(tmp):
     with pytest.warns(UserWarning, match="gone.mtl not found"):
         _, _, A5 = voxwarp.read_mesh(tmp / "nolib.obj", attributes=True)
     assert A5["materials"][0]["name"] == "skin"
+
+
+def test_obj_groups_come_through_as_arrays(tmp):
+    # A tetrahedron whose faces are in two groups (one named by "o") and one in none: read, remeshed (a pin alone: the round trip) and written.
+    (tmp / "groups.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\ng base\nf 1 3 2\no side wall\nf 1 2 4\nf 1 4 3\ng\nf 2 3 4\n")
+    V, F, A = voxwarp.read_mesh(tmp / "groups.obj", attributes=True)
+    assert A["groups"] == ["base", "side wall"] and A["group"].dtype == np.int32 and A["group"].tolist() == [0, 1, 1, -1]
+    V2, F2, report, A2 = voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0.2, 0.2, 0.2]}]}]}, resolution=32, attributes=A)
+    assert A2["groups"] == A["groups"] and A2["group"].shape == (len(F2),)
+    # Each output triangle in the group of the input face its centroid is nearest (the faces' planes: z = 0, y = 0,
+    # x = 0 and x + y + z = 1), away from the tetrahedron's edges.
+    c = V2[F2].mean(axis=1)
+    planes = np.stack([c[:, 2], c[:, 1], c[:, 0], (1 - c.sum(axis=1)) / np.sqrt(3)], axis=1)
+    order = np.sort(np.abs(planes), axis=1)
+    clear = order[:, 1] - order[:, 0] > 2 * report["voxel_size"]
+    nearest = np.argmin(np.abs(planes), axis=1)
+    assert clear.sum() > len(F2) / 2
+    assert (A2["group"][clear] == np.array([0, 1, 1, -1])[nearest[clear]]).all()
+    voxwarp.write_mesh(tmp / "out.obj", V2, F2, A2)
+    _, F3, A3 = voxwarp.read_mesh(tmp / "out.obj", attributes=True)
+    assert A3["groups"] == A2["groups"] and np.array_equal(A3["group"], A2["group"]) and np.array_equal(F3, F2)
+    with pytest.raises(voxwarp.InvalidInput, match="\"group\" and \"groups\" go together"):
+        voxwarp.write_mesh(tmp / "bad.obj", V2, F2, {"group": A2["group"]})

@@ -23,10 +23,11 @@ Functions
         report: the dict `voxwarp deform --report` writes (residuals, surface misses, volumes, timings).
     deform(..., attributes=A) -> (V, F, report, attributes): the input's attributes in, the output's out.
 
-Attributes (texture coordinates, colours, materials; README.md, "Texture coordinates, colours and materials"), a
-dict with the keys the mesh has: "uv" float64 (k, 2) and "uv_index" int32 (m, 3) (each triangle's corners' rows of
-uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,) (index into "materials", -1: none),
-"materials": [{"name", "diffuse", "texture", "statements"}]. A missing .mtl or texture is a UserWarning.
+Attributes (texture coordinates, colours, materials, groups; README.md, "Texture coordinates, colours, materials and
+groups"), a dict with the keys the mesh has: "uv" float64 (k, 2) and "uv_index" int32 (m, 3) (each triangle's
+corners' rows of uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,) (index into "materials",
+-1: none), "materials": [{"name", "diffuse", "texture", "statements"}], "group" int32 (m,) (index into "groups", -1:
+none), "groups": [names] (OBJ's g and o). A missing .mtl or texture is a UserWarning.
 
 Voxmap
     Voxmap(density, origin=(0, 0, 0), voxel_size=1.0): from a (nx, ny, nz) array (copied).

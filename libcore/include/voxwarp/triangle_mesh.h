@@ -40,9 +40,11 @@ struct TriangleMesh {
     std::vector<std::array<std::int32_t, 3>> triangle_uvs; ///< #T or empty: each triangle's corners' indices into uvs (-1: none)
     std::vector<Eigen::Vector3f> colours;                  ///< #V or empty: vertex colours, RGB in [0, 1]
     std::vector<std::int32_t> triangle_materials;          ///< #T or empty: each triangle's index into materials (-1: none)
+    std::vector<std::string> groups;                       ///< group names (OBJ's g and o statements, the rest of the line)
+    std::vector<std::int32_t> triangle_groups;             ///< #T or empty: each triangle's index into groups (-1: none)
     std::vector<Material> materials;
 
-    bool has_attributes() const { return !triangle_uvs.empty() || !colours.empty() || !triangle_materials.empty(); }
+    bool has_attributes() const { return !triangle_uvs.empty() || !colours.empty() || !triangle_materials.empty() || !triangle_groups.empty(); }
 
     std::size_t face_count() const { return triangles.size() + quads.size(); }
     /// The same surface with every quad split into two triangles (along its shorter diagonal).
