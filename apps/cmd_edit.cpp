@@ -1,10 +1,13 @@
 // voxwarp edit: the direct-manipulation editor's local server (cpp-httplib, 127.0.0.1 only). The page (web/) and
 // scripts use the same HTTP API (README.md, "The editor"):
 //   GET  /                      the editor page (and its scripts, three.js from Debian's libjs-three)
-//   GET  /api/model             the input mesh, binary PLY; X-Voxwarp-Model: JSON facts (name, bounds, voxel size)
+//   GET  /api/model             the input mesh, binary PLY (with texture coordinates and colours when it has them);
+//                               X-Voxwarp-Model: JSON facts (name, bounds, voxel size, whether it has a texture)
+//   GET  /api/texture           the input's (first) texture, PNG or JPEG (404 when none)
 //   GET  /api/edit              the edit file given on the command line (204 when none)
 //   POST /api/deform[?resolution=N]   body: an edit file's JSON; 200: the deformed mesh (binary PLY,
-//                               Content-Type application/ply), the report as JSON in the X-Voxwarp-Report header
+//                               Content-Type application/ply; at full resolution with the input's texture
+//                               coordinates and colours carried), the report as JSON in the X-Voxwarp-Report header
 //   GET  /api/lattice           the last deform's last edit's lattice: {"size": [nx, ny, nz], "rest": [[x, y, z], ...],
 //                               "solved": [...]}, control point i + nx (j + ny k) (204 before the first deform)
 // Errors answer {"error": message}: 400 malformed edits (the CLI's message, the file named "request") or a
@@ -92,7 +95,8 @@ public:
         try {
             DeformReport report;
             const auto start = std::chrono::steady_clock::now();
-            // Drag previews (below the full resolution) are shown for a moment: they skip snapping, the result does not.
+            // Drag previews (below the full resolution) are shown for a moment: they skip snapping and the attributes
+            // (texture coordinates, colours), the result does not.
             const TriangleMesh out = session_.deform(script, resolution, report, progress, resolution >= args_.resolution);
             report.seconds_total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             send_mesh(response, out);
@@ -112,6 +116,11 @@ public:
         } catch (const std::bad_alloc&) {
             send_error(response, 503, "out of memory; lower the resolution");
         }
+    }
+
+    void texture(httplib::Response& response) const {
+        if (texture_.empty()) return send_error(response, 404, "the model has no texture");
+        send_texture(response, texture_);
     }
 
     void lattice(httplib::Response& response) {
@@ -139,7 +148,8 @@ public:
                                    {"resolution", args_.resolution},
                                    {"voxel_size", session_.voxel_size()},
                                    {"vertices", session_.mesh().vertices.size()},
-                                   {"faces", session_.mesh().face_count()}};
+                                   {"faces", session_.mesh().face_count()},
+                                   {"texture", !texture_.empty()}};
         send_mesh(response, session_.mesh());
         response.set_header("X-Voxwarp-Model", facts.dump());
     }
@@ -150,6 +160,7 @@ private:
     std::mutex mutex_;
     std::atomic<std::uint64_t> latest_{0};
     std::string lattice_; // lattice_json of the last deform, under mutex_
+    std::string texture_ = first_texture(session_.mesh());
 };
 
 } // namespace
@@ -181,10 +192,9 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
                 throw CLI::ValidationError("--token", "expected 16 to 256 letters, digits, '-', '_', '.' or '~'");
         }
         action = [a, &global] {
-            TriangleMesh mesh = read_mesh(a->mesh);
-            // The page shows and saves geometry only: carrying texture coordinates and materials through every
-            // drag preview would cost each one a source search for nothing.
-            mesh.uvs.clear(), mesh.triangle_uvs.clear(), mesh.colours.clear(), mesh.triangle_materials.clear(), mesh.materials.clear(), mesh.triangle_groups.clear(), mesh.groups.clear();
+            std::vector<std::string> warnings;
+            TriangleMesh mesh = read_mesh(a->mesh, &warnings); // drag previews carry no attributes (DeformSession)
+            for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
             std::string initial_edit;
             if (!a->edits.empty()) {
                 read_edit_file(a->edits); // refused here, with the file's name, rather than in the page
@@ -208,6 +218,7 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
                 else r.set_content(initial_edit, "application/json");
             });
             server.Get("/api/lattice", [&](const httplib::Request&, httplib::Response& r) { editor.lattice(r); });
+            server.Get("/api/texture", [&](const httplib::Request&, httplib::Response& r) { editor.texture(r); });
             server.Post("/api/deform", [&](const httplib::Request& q, httplib::Response& r) { editor.deform(q, r); });
             server.Get("/favicon.ico", [](const httplib::Request&, httplib::Response& r) { r.status = 204; });
             server.Post(R"(/.*)", [](const httplib::Request& q, httplib::Response& r) { send_error(r, 404, "no such path: " + q.path); });

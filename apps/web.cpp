@@ -144,7 +144,26 @@ void serve_assets(httplib::Server& server) {
     });
 }
 
-void send_mesh(httplib::Response& response, const TriangleMesh& mesh) { response.set_content(encode_ply(mesh), "application/ply"); }
+void send_mesh(httplib::Response& response, const TriangleMesh& mesh) {
+    response.set_content(mesh.triangle_uvs.empty() && mesh.colours.empty() ? encode_ply(mesh) : encode_mesh(mesh, ".ply"), "application/ply");
+}
+
+void send_texture(httplib::Response& response, const std::string& bytes) {
+    const bool jpeg = bytes.size() > 2 && static_cast<unsigned char>(bytes[0]) == 0xff && static_cast<unsigned char>(bytes[1]) == 0xd8;
+    response.set_content(bytes, jpeg ? "image/jpeg" : "image/png");
+}
+
+std::string first_texture(const TriangleMesh& mesh) {
+    if (mesh.triangle_uvs.empty()) return {};
+    for (const auto& material : mesh.materials) {
+        if (material.texture.empty()) continue;
+        if (!material.texture_bytes.empty()) return material.texture_bytes;
+        std::ifstream in(material.texture, std::ios::binary);
+        std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        if (!bytes.empty()) return bytes;
+    }
+    return {};
+}
 
 std::string chromium_path() {
     if (const char* env = std::getenv("VOXWARP_CHROMIUM"); env && *env) return ::access(env, X_OK) == 0 ? env : "";
@@ -246,17 +265,7 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     config["meshes"] = nlohmann::json::array();
     for (std::size_t i = 0; i < meshes.size(); ++i) {
         const TriangleMesh& m = meshes[i];
-        std::string texture;
-        if (!m.triangle_uvs.empty())
-            for (const auto& material : m.materials) {
-                if (!texture.empty() || material.texture.empty()) continue;
-                if (!material.texture_bytes.empty()) {
-                    texture = material.texture_bytes;
-                } else {
-                    std::ifstream in(material.texture, std::ios::binary);
-                    texture.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-                }
-            }
+        const std::string texture = first_texture(m);
         plys.push_back(texture.empty() && m.colours.empty() ? encode_ply(m) : encode_mesh(m, ".ply"));
         textures.push_back(texture);
         config["meshes"].push_back({{"label", i < labels.size() ? labels[i] : ""}, {"texture", !texture.empty()}, {"colours", !m.colours.empty()}});
@@ -277,8 +286,7 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     server.Get(R"(/api/render/texture/(\d+))", [&](const httplib::Request& q, httplib::Response& r) {
         const std::size_t i = std::stoul(q.matches[1]);
         if (i >= textures.size() || textures[i].empty()) return send_error(r, 404, "no texture " + std::to_string(i));
-        const bool jpeg = textures[i].size() > 2 && static_cast<unsigned char>(textures[i][0]) == 0xff && static_cast<unsigned char>(textures[i][1]) == 0xd8;
-        r.set_content(textures[i], jpeg ? "image/jpeg" : "image/png");
+        send_texture(r, textures[i]);
     });
     server.Post("/api/render/png", [&](const httplib::Request& q, httplib::Response& r) {
         std::lock_guard lock(mutex);

@@ -41,8 +41,16 @@ std::string random_token();
 /// Serve every embedded file (GET) and answer other GETs with 404.
 void serve_assets(httplib::Server& server);
 
-/// Mesh as the body of a response: binary PLY (voxwarp::encode_ply), Content-Type application/ply.
+/// Mesh as the body of a response: binary PLY, Content-Type application/ply; with its texture coordinates (s t, a
+/// vertex on a seam once per side) and vertex colours (red green blue) when it has them.
 void send_mesh(httplib::Response& response, const TriangleMesh& mesh);
+
+/// The bytes of the first texture of a mesh with texture coordinates (its first material's that has one, read from
+/// its file or carried embedded); empty when there is none or it cannot be read.
+std::string first_texture(const TriangleMesh& mesh);
+
+/// A texture's bytes as the body of a response: image/jpeg or image/png, by its first bytes.
+void send_texture(httplib::Response& response, const std::string& bytes);
 
 /// An error response: {"error": message} with `status`.
 void send_error(httplib::Response& response, int status, const std::string& message);

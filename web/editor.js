@@ -123,6 +123,20 @@
   // unless Before is on (no translucent ghost over the result: the two surfaces coincide and would z-fight).
   const sourceMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0x9aa0a8));
   const resultMesh = new THREE.Mesh(new THREE.BufferGeometry(), Viewer.material(0xd99a5b));
+  // A model with a texture (or vertex colours) is shown with it wherever its geometry carries texture coordinates
+  // (or colours): the model, and full results (drag previews carry none, and show in the plain colour).
+  const plain = new Map([[sourceMesh, sourceMesh.material], [resultMesh, resultMesh.material]]);
+  let modelTexture = null, texturedMaterial = null, colouredMaterial = null;
+  function dress(mesh) {
+    const g = mesh.geometry.attributes;
+    const material = g.uv && texturedMaterial ? texturedMaterial : g.color && colouredMaterial ? colouredMaterial : plain.get(mesh);
+    if (mesh.material !== material) mesh.material = material;
+  }
+  api.deformAt = resolution => requestDeform(resolution); // for scripts: a result (or a preview, below the full resolution)
+  api.dressed = function () {
+    const kind = m => (m.material === texturedMaterial ? 'texture' : m.material === colouredMaterial ? 'colours' : 'plain');
+    return { source: kind(sourceMesh), result: kind(resultMesh) };
+  };
   let before = false;
   view.scene.add(resultMesh); view.scene.add(sourceMesh);
   const handles = new THREE.Group();
@@ -171,6 +185,7 @@
   }
   function showSource() {
     sourceMesh.geometry = sourceOf(state.edits.length) || model;
+    dress(sourceMesh);
     sourceMesh.visible = before;
     resultMesh.visible = !before;
     document.getElementById('before').checked = before;
@@ -192,7 +207,7 @@
   // at once (the server cancels the preview it supersedes) and no queued preview is sent after it.
   let inFlight = false, pending = 0, issued = 0, lastFull = 0;
   function requestDeform(resolution) {
-    if (!script().edits.length) { resultMesh.geometry = model; showSource(); refreshLattice(); return Promise.resolve(true); }
+    if (!script().edits.length) { resultMesh.geometry = model; dress(resultMesh); showSource(); refreshLattice(); return Promise.resolve(true); }
     const full = resolution === fullResolution;
     if (full) { lastFull = ++issued; pending = 0; }
     else if (inFlight) { pending = resolution; return Promise.resolve(true); }
@@ -213,6 +228,7 @@
         if (id < lastFull || (full && body !== api.editJSON())) return true; // a later full result is coming
         const previous = resultMesh.geometry;
         resultMesh.geometry = Viewer.parsePly(buffer);
+        dress(resultMesh);
         if (previous !== resultMesh.geometry && !isSource(previous)) previous.dispose();
         redraw();
         lastReport = JSON.parse(response.headers.get('X-Voxwarp-Report') || '{}');
@@ -771,7 +787,15 @@
     modelName = facts.name || 'model';
     document.getElementById('model-name').textContent = modelName;
     model = Viewer.parsePly(await response.arrayBuffer());
+    if (facts.texture && model.attributes.uv) {
+      // Fetched with the token (an <img> could not send it), then handed to three.js as an object URL.
+      const url = URL.createObjectURL(await (await Viewer.api('/api/texture')).blob());
+      modelTexture = await new Promise((resolve, reject) => new THREE.TextureLoader().load(url, resolve, undefined, reject));
+      texturedMaterial = Viewer.material(0xffffff, { map: modelTexture });
+    }
+    if (model.attributes.color) colouredMaterial = Viewer.material(0xffffff, { vertexColors: true });
     resultMesh.geometry = model;
+    dress(resultMesh);
     handleRadius = model.boundingSphere.radius * 0.025;
     numbers.radius.min = (model.boundingSphere.radius * 0.02).toPrecision(3);
     numbers.radius.max = (model.boundingSphere.radius * 0.8).toPrecision(3);

@@ -507,7 +507,7 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
         report.seconds_snap = seconds_since(ts);
     }
     if (options.target_faces > 0) out = decimate(out, options.target_faces), sources.clear();
-    if (mesh.has_attributes() && out.face_count() > 0) {
+    if (options.attributes && mesh.has_attributes() && out.face_count() > 0) {
         const auto tt = Clock::now();
         if (!out.quads.empty()) out = out.triangulated(), sources.clear();
         if (sources.empty()) sources = find(out);

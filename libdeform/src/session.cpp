@@ -20,9 +20,10 @@ double DeformSession::voxel_size(int resolution) const {
     return voxelize_frame(mesh_, vo).voxel_size;
 }
 
-TriangleMesh DeformSession::deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress, bool snap) {
+TriangleMesh DeformSession::deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress, bool full) {
     DeformOptions o = options_;
-    o.snap = o.snap && snap;
+    o.snap = o.snap && full;
+    o.attributes = o.attributes && full;
     if (resolution > 0) o.voxelize.resolution = resolution, o.voxelize.voxel_size = 0;
     const int key = resolution > 0 ? resolution : 0;
     o.progress = progress;
@@ -36,7 +37,7 @@ TriangleMesh DeformSession::deform(const EditScript& script, int resolution, Def
     recent_.erase(std::remove(recent_.begin(), recent_.end(), key), recent_.end());
     recent_.push_back(key);
     while (recent_.size() > 2) voxmaps_.erase(recent_.front()), recent_.erase(recent_.begin());
-    if (o.snap && !surface_) surface_ = std::make_unique<SourceSurface>(mesh_);
+    if ((o.snap || (o.attributes && mesh_.has_attributes())) && !surface_) surface_ = std::make_unique<SourceSurface>(mesh_);
     return deform_internal::deform_voxelized(mesh_, *it->second, script, o, report, surface_.get());
 }
 

@@ -4,10 +4,11 @@
 import base64
 import json
 import math
+import os
 
 from selenium.webdriver.common.action_chains import ActionChains
 
-from conftest import data, run_cli
+from conftest import EditServer, data, run_cli
 from test_editor import wait
 from test_editor_bugs import box_page  # noqa: F401  (the fixture)
 
@@ -254,3 +255,34 @@ def test_the_orthographic_view_has_no_perspective_and_still_picks(box_page):  # 
     wait(driver, "window.voxwarp.state.current.constraints.length === 1")
     point = driver.execute_script("return window.voxwarp.state.current.constraints[0].point")
     assert math.dist(point, [1.5, 0.2, 0.5]) < 0.05, point
+
+
+def test_a_textured_model_is_shown_with_its_texture_before_and_after_an_edit(tmp_path):
+    # Spot (a UV map and a 1024^2 texture): the page shows the model textured, and the full result of an edit too,
+    # with the CLI's texture coordinates, byte for byte; a drag preview carries none and shows in the plain colour.
+    from test_editor import browser
+    from test_editor_bugs import load_good
+    server = EditServer(data("spot_triangulated.obj"), "--resolution", "48")
+    driver = browser(1000, 700)
+    try:
+        driver.set_script_timeout(60)
+        driver.get(server.url)
+        wait(driver, "window.voxwarp && window.voxwarp.ready")
+        assert driver.execute_script("return window.voxwarp.dressed()") == {"source": "texture", "result": "texture"}
+        size = driver.execute_async_script("const done = arguments[0]; Viewer.api('/api/texture').then(r => r.blob()).then(b => done(b.size))")
+        assert size == os.path.getsize(data("spot_texture.png"))
+        edit = json.load(open(data("spot_head.json")))
+        load_good(driver, edit)
+        wait(driver, "window.voxwarp.lastResolution === 48 && window.voxwarp.shownEdit === window.voxwarp.editJSON()")
+        assert driver.execute_script("return window.voxwarp.dressed()")["result"] == "texture"
+        shown = base64.b64decode(wait(driver, "window.voxwarp.lastPlyBase64()"))
+        (tmp_path / "edit.json").write_text(driver.execute_script("return window.voxwarp.editJSON()"))
+        r = run_cli("deform", data("spot_triangulated.obj"), tmp_path / "edit.json", "-o", tmp_path / "cli.ply", "-r", 48, "-q")
+        assert r.returncode == 0, r.stderr
+        assert b"property float s" in shown[:1000] and (tmp_path / "cli.ply").read_bytes() == shown
+        # A preview (below the full resolution): no texture coordinates, the plain colour.
+        driver.execute_async_script("const done = arguments[0]; window.voxwarp.deformAt(24).then(done)")
+        assert driver.execute_script("return window.voxwarp.dressed()")["result"] == "plain"
+    finally:
+        driver.quit()
+        server.stop()

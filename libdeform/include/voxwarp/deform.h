@@ -25,6 +25,9 @@ struct DeformOptions {
     /// Move each output vertex onto the exact image of its source point on the input (snap.h), where that moves it
     /// at most half a voxel and flips no face. Mesh input, volume mode only.
     bool snap = true;
+    /// Carry the input's texture coordinates, colours, materials and groups onto the output (transfer.h; mesh
+    /// input, volume mode; --mode vertex keeps them as they are).
+    bool attributes = true;
     int max_steps = 8;             ///< most steps a min-norm edit may be split into to avoid folding the lattice map
     double far_fraction = 0.25;    ///< constraint points farther than this fraction of the model's size from its box are refused
     ProgressCallback progress;     ///< optional progress / cancel (every stage)

@@ -26,9 +26,9 @@ public:
 
     /// deform_mesh(mesh(), script, options at `resolution`) with the voxelization of that resolution reused
     /// (made on first use; the two most recent resolutions are kept). resolution 0: the default.
-    /// report.seconds_voxelize is 0 when the voxelization was reused. `snap` false skips snapping even where
-    /// options().snap asks for it (quick previews). @throw as deform_mesh.
-    TriangleMesh deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress = {}, bool snap = true);
+    /// report.seconds_voxelize is 0 when the voxelization was reused. `full` false gives a quick preview: no
+    /// snapping and no attributes carried, even where options() ask for them. @throw as deform_mesh.
+    TriangleMesh deform(const EditScript& script, int resolution, DeformReport& report, const ProgressCallback& progress = {}, bool full = true);
 
     const TriangleMesh& mesh() const { return mesh_; }
     const DeformOptions& options() const { return options_; }
