@@ -14,42 +14,23 @@ import sys
 
 here = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(here, "..", "tests"))
-from conftest import EditServer, data  # noqa: E402  (the tests' server and browser helpers)
-from test_editor import browser, wait  # noqa: E402
+from conftest import data  # noqa: E402  (the tests' server and browser helpers)
+from test_editor import editor_page, pointer_drag, wait  # noqa: E402
 
 parser = argparse.ArgumentParser()
 parser.add_argument("--repetitions", type=int, default=5)
 args = parser.parse_args()
 
-DRAG = """
-const [x0, y0, up, done] = arguments;
-const canvas = document.getElementById('view'), r = canvas.getBoundingClientRect();
-const fire = (type, x, y) => canvas.dispatchEvent(new PointerEvent(type, {clientX: r.left + x, clientY: r.top + y, button: 0, pointerId: 7, bubbles: true}));
-fire('pointerdown', x0, y0);
-let step = 0;
-const timer = setInterval(() => {
-  ++step;
-  fire('pointermove', x0 + up * step * 0.3, y0 - up * step * 0.4);
-  if (step === 125) { clearInterval(timer); fire('pointerup', x0 + up * step * 0.3, y0 - up * step * 0.4); done(window.voxwarp.drag); }
-}, 16);
-"""
 
-server = EditServer(data("bunny.obj"), "--resolution", "128")
-driver = browser(1000, 700)
-try:
-    driver.set_script_timeout(60)
-    driver.get(server.url)
-    wait(driver, "window.voxwarp && window.voxwarp.ready")
+with editor_page(data("bunny.obj"), "--resolution", "128") as (driver, _):
     edit = json.load(open(data("bunny_ear.json")))
     assert driver.execute_async_script("const done = arguments[2]; window.voxwarp.loadEdit(arguments[0], arguments[1]).then(done)", json.dumps(edit), "bunny_ear.json")
     rates = []
     for k in range(args.repetitions):
         wait(driver, "window.voxwarp.lastResolution === 128 && !window.voxwarp.drag.active")
         x, y = driver.execute_script("return window.voxwarp.screenOf(window.voxwarp.state.current.constraints[0].to)")
-        drag = driver.execute_async_script(DRAG, x, y, 1 if k % 2 == 0 else -1)  # up, then back down
+        up = 1 if k % 2 == 0 else -1  # up, then back down
+        drag = pointer_drag(driver, x, y, 0.6 * up, -0.8 * up)  # as the browser test drags
         rates.append(drag["updates"] / max(drag["seconds"], 1e-9))
         print("drag: %d updates shown in %.2f s: %.1f frames a second" % (drag["updates"], drag["seconds"], rates[-1]))
     print("median %.1f frames a second over %d drags (goal >= 5)" % (statistics.median(rates), len(rates)))
-finally:
-    driver.quit()
-    server.stop()

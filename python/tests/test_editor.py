@@ -3,6 +3,7 @@
 # edit file against the CLI. The live drag's frame rate is a benchmark (python/bench/bench_drag.py). The server
 # without a browser: test_editor_server.py.
 import base64
+import contextlib
 import io
 import os
 import subprocess
@@ -15,7 +16,7 @@ from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
 
 import voxwarp
-from conftest import CLI, data, run_cli
+from conftest import CLI, EditServer, data, run_cli
 
 CHROMEDRIVER = "/usr/bin/chromedriver"
 
@@ -41,6 +42,39 @@ def wait(driver, condition, timeout=60):
             return value
         time.sleep(0.05)
     raise AssertionError("timed out waiting for " + condition + "; errors: %s" % driver.execute_script("return window.voxwarp && window.voxwarp.errors"))
+
+
+def pointer_drag(driver, x0, y0, dx, dy, steps=125):
+    """Pointer moves fed to the page every 16 ms, as a mouse would, from (x0, y0) by (dx, dy) canvas pixels a move
+    (WebDriver's own actions deliver only a few moves a second); returns the page's drag facts."""
+    return driver.execute_async_script(
+        """
+        const [x0, y0, dx, dy, steps, done] = arguments;
+        const canvas = document.getElementById('view'), r = canvas.getBoundingClientRect();
+        const fire = (type, x, y) => canvas.dispatchEvent(new PointerEvent(type, {clientX: r.left + x, clientY: r.top + y, button: 0, pointerId: 7, bubbles: true}));
+        fire('pointerdown', x0, y0);
+        let step = 0;
+        const timer = setInterval(() => {
+          ++step;
+          fire('pointermove', x0 + step * dx, y0 + step * dy);
+          if (step === steps) { clearInterval(timer); fire('pointerup', x0 + step * dx, y0 + step * dy); done(window.voxwarp.drag); }
+        }, 16);
+        """, x0, y0, dx, dy, steps)
+
+
+@contextlib.contextmanager
+def editor_page(mesh, *args, width=1000, height=700):
+    """`voxwarp edit MESH ARGS` and a browser on its page, ready: (driver, server); both closed after."""
+    server = EditServer(mesh, *args)
+    driver = browser(width, height)
+    try:
+        driver.set_script_timeout(60)
+        driver.get(server.url)
+        wait(driver, "window.voxwarp && window.voxwarp.ready")
+        yield driver, server
+    finally:
+        driver.quit()
+        server.stop()
 
 
 def not_blank(png):
@@ -101,19 +135,7 @@ def test_click_drag_save_and_the_cli_agree(server, tmp_path):
         # not asserted here (two cores under a parallel build gave 3.9).
         wait(driver, "window.voxwarp.lastResolution === 128")
         tx, ty = driver.execute_script("return window.voxwarp.screenOf(window.voxwarp.state.current.constraints[0].to)")
-        drag = driver.execute_async_script(
-            """
-            const [x0, y0, done] = arguments;
-            const canvas = document.getElementById('view'), r = canvas.getBoundingClientRect();
-            const fire = (type, x, y) => canvas.dispatchEvent(new PointerEvent(type, {clientX: r.left + x, clientY: r.top + y, button: 0, pointerId: 7, bubbles: true}));
-            fire('pointerdown', x0, y0);
-            let step = 0;
-            const timer = setInterval(() => {
-              ++step;
-              fire('pointermove', x0 + step * 0.6, y0 - step * 0.8);
-              if (step === 125) { clearInterval(timer); fire('pointerup', x0 + step * 0.6, y0 - step * 0.8); done(window.voxwarp.drag); }
-            }, 16);
-            """, tx, ty)
+        drag = pointer_drag(driver, tx, ty, 0.6, -0.8)
         assert drag["updates"] >= 1
         # The full-resolution result after the drag.
         wait(driver, "window.voxwarp.lastResolution === 128 && !window.voxwarp.drag.active && window.voxwarp.requests > 0")

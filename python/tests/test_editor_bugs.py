@@ -7,23 +7,15 @@ import math
 
 import pytest
 
-from conftest import EditServer, data
-from test_editor import browser, wait
+from conftest import data
+from test_editor import editor_page, wait
 
 
 @pytest.fixture
 def box_page():
     """The editor on the 4 x 1 x 1 box at 48 in a browser: (driver, server)."""
-    server = EditServer(data("box.obj"), "--resolution", "48")
-    driver = browser(1000, 700)
-    try:
-        driver.set_script_timeout(60)
-        driver.get(server.url)
-        wait(driver, "window.voxwarp && window.voxwarp.ready")
-        yield driver, server
-    finally:
-        driver.quit()
-        server.stop()
+    with editor_page(data("box.obj"), "--resolution", "48") as page:
+        yield page
 
 
 def load(driver, edit, name="edit.json"):

@@ -8,8 +8,8 @@ import os
 
 from selenium.webdriver.common.action_chains import ActionChains
 
-from conftest import EditServer, data, run_cli
-from test_editor import wait
+from conftest import data, run_cli
+from test_editor import editor_page, wait
 from test_editor_bugs import box_page  # noqa: F401  (the fixture)
 
 
@@ -260,14 +260,8 @@ def test_the_orthographic_view_has_no_perspective_and_still_picks(box_page):  # 
 def test_a_textured_model_is_shown_with_its_texture_before_and_after_an_edit(tmp_path):
     # Spot (a UV map and a 1024^2 texture): the page shows the model textured, and the full result of an edit too,
     # with the CLI's texture coordinates, byte for byte; a drag preview carries none and shows in the plain colour.
-    from test_editor import browser
     from test_editor_bugs import load_good
-    server = EditServer(data("spot_triangulated.obj"), "--resolution", "48")
-    driver = browser(1000, 700)
-    try:
-        driver.set_script_timeout(60)
-        driver.get(server.url)
-        wait(driver, "window.voxwarp && window.voxwarp.ready")
+    with editor_page(data("spot_triangulated.obj"), "--resolution", "48") as (driver, _):
         assert driver.execute_script("return window.voxwarp.dressed()") == {"source": "texture", "result": "texture"}
         size = driver.execute_async_script("const done = arguments[0]; Viewer.api('/api/texture').then(r => r.blob()).then(b => done(b.size))")
         assert size == os.path.getsize(data("spot_texture.png"))
@@ -283,6 +277,3 @@ def test_a_textured_model_is_shown_with_its_texture_before_and_after_an_edit(tmp
         # A preview (below the full resolution): no texture coordinates, the plain colour.
         driver.execute_async_script("const done = arguments[0]; window.voxwarp.deformAt(24).then(done)")
         assert driver.execute_script("return window.voxwarp.dressed()")["result"] == "plain"
-    finally:
-        driver.quit()
-        server.stop()
