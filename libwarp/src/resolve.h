@@ -118,10 +118,16 @@ inline bool carry_less(const Carry& p, const Carry& q) {
     return std::tie(p.cell[2], p.cell[1], p.cell[0], p.inside) < std::tie(q.cell[2], q.cell[1], q.cell[0], q.inside);
 }
 
+/// Most cells one carried voxel's image box may hold (8^3). A wild edit stretches a voxel over hundreds of voxels
+/// along each axis, and its box, millions of cells per voxel, once took all memory (a frame turned 178 degrees on
+/// the box at 32: 17 GB and growing) whatever --max-memory said; a wall stretched that far is past keeping
+/// closed anyway. Such a voxel holds only the cells nearest its image's centre (link_carries adds them).
+constexpr std::int64_t kMaxImageCells = 512;
+
 /// The target cells a carried voxel holds: those whose centres (integer index points) lie in the bounding box of
 /// its image, centre + J [-1/2, 1/2]^3 (J's columns: the map's derivatives per voxel step, target index units),
-/// half-open, and never less than a voxel wide along an axis. See the file comment for why the box and not the
-/// image itself. `push(cell)` for each.
+/// half-open, and never less than a voxel wide along an axis; none when that box would hold more than
+/// kMaxImageCells. See the file comment for why the box and not the image itself. `push(cell)` for each.
 template <class Push>
 inline void image_cells(const Eigen::Vector3d& centre, const Eigen::Matrix3d& J, Push&& push) {
     std::int64_t first[3], last[3];
@@ -135,6 +141,9 @@ inline void image_cells(const Eigen::Vector3d& centre, const Eigen::Matrix3d& J,
         first[a] = std::int64_t(std::ceil(centre[a] - half));
         last[a] = std::int64_t(std::ceil(centre[a] + half)) - 1;
     }
+    double cells = 1;
+    for (int a = 0; a < 3; ++a) cells *= double(last[a] - first[a] + 1);
+    if (!(cells <= double(kMaxImageCells))) return; // also a non-finite map
     for (std::int64_t z = first[2]; z <= last[2]; ++z)
         for (std::int64_t y = first[1]; y <= last[1]; ++y)
             for (std::int64_t x = first[0]; x <= last[0]; ++x) push(std::array<std::int64_t, 3>{x, y, z});
