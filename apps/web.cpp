@@ -144,9 +144,15 @@ void serve_assets(httplib::Server& server) {
     });
 }
 
-void send_mesh(httplib::Response& response, const TriangleMesh& mesh) {
-    response.set_content(mesh.triangle_uvs.empty() && mesh.colours.empty() ? encode_ply(mesh) : encode_mesh(mesh, ".ply"), "application/ply");
+namespace {
+/// A mesh as binary PLY for a page: with texture coordinates and colours when it has them (encode_mesh, which splits
+/// a vertex on a seam), the plain geometry otherwise.
+std::string page_ply(const TriangleMesh& mesh) {
+    return mesh.triangle_uvs.empty() && mesh.colours.empty() ? encode_ply(mesh) : encode_mesh(mesh, ".ply");
 }
+} // namespace
+
+void send_mesh(httplib::Response& response, const TriangleMesh& mesh) { response.set_content(page_ply(mesh), "application/ply"); }
 
 void send_texture(httplib::Response& response, const std::string& bytes) {
     const bool jpeg = bytes.size() > 2 && static_cast<unsigned char>(bytes[0]) == 0xff && static_cast<unsigned char>(bytes[1]) == 0xd8;
@@ -266,7 +272,7 @@ void render_png(const std::vector<TriangleMesh>& meshes, const std::vector<std::
     for (std::size_t i = 0; i < meshes.size(); ++i) {
         const TriangleMesh& m = meshes[i];
         const std::string texture = first_texture(m);
-        plys.push_back(texture.empty() && m.colours.empty() ? encode_ply(m) : encode_mesh(m, ".ply"));
+        plys.push_back(page_ply(m));
         textures.push_back(texture);
         config["meshes"].push_back({{"label", i < labels.size() ? labels[i] : ""}, {"texture", !texture.empty()}, {"colours", !m.colours.empty()}});
     }

@@ -162,10 +162,7 @@ TEST(Constraints, DerivativeWeightsAreTheJacobian) {
             std::array<int, 3> region;
             std::array<double, 64> w;
             l.derivative_weights(stu, d, region, w);
-            Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-            for (int k = 0; k < 4; ++k)
-                for (int j = 0; j < 4; ++j)
-                    for (int i = 0; i < 4; ++i) sum += w[std::size_t(i + 4 * (j + 4 * k))] * l.point(region[0] + i, region[1] + j, region[2] + k);
+            const Eigen::Vector3d sum = l.combine(region, w);
             EXPECT_LE((sum - J * d).norm(), 1e-12);
             const double e = 1e-6;
             EXPECT_LE(((l.evaluate(stu + e * d) - l.evaluate(stu - e * d)) / (2 * e) - J * d).norm(), 1e-7);
@@ -186,10 +183,7 @@ TEST(Constraints, SecondDerivativeWeightsAreTheMapsCurvature) {
             std::array<int, 3> region;
             std::array<double, 64> w;
             l.second_derivative_weights(stu, a, b, region, w);
-            Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-            for (int k = 0; k < 4; ++k)
-                for (int j = 0; j < 4; ++j)
-                    for (int i = 0; i < 4; ++i) sum += w[std::size_t(i + 4 * (j + 4 * k))] * l.point(region[0] + i, region[1] + j, region[2] + k);
+            const Eigen::Vector3d sum = l.combine(region, w);
             const double e = 1e-5;
             const Eigen::Vector3d differences = (l.jacobian(stu + e * a) - l.jacobian(stu - e * a)) * b / (2 * e);
             EXPECT_LE((sum - differences).norm(), 1e-6 * (1 + differences.norm())) << stu.transpose() << " | " << a.transpose() << " | " << b.transpose();
@@ -217,11 +211,7 @@ TEST(Constraints, BendRowsHoldAPlateFlatAsItTurns) {
         std::array<int, 3> region;
         std::array<double, 64> w;
         l.second_derivative_weights(stu, to_parameter * a, to_parameter * b, region, w);
-        Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-        for (int k = 0; k < 4; ++k)
-            for (int j = 0; j < 4; ++j)
-                for (int i = 0; i < 4; ++i) sum += w[std::size_t(i + 4 * (j + 4 * k))] * l.point(region[0] + i, region[1] + j, region[2] + k);
-        return sum;
+        return l.combine(region, w);
     };
     for (const auto& [a, b] : {std::pair{t1, t1}, std::pair{t1, t2}, std::pair{t2, t2}})
         EXPECT_LE((curvature(s.lattice, a, b) - R * curvature(kRest, a, b)).norm(), 1e-9);

@@ -474,7 +474,9 @@ TEST(Deform, ConnectedPointsMeet) {
         EXPECT_LE(gap, 0.5); // the bar
         // The rigid solve's map is the volume mode's too (one step); min-norm's folds, and the volume mode splits it
         // into steps (8 here), whose meeting point is its own.
-        if (std::string(solver) == "rigid") EXPECT_LE(through, 0.5);
+        if (std::string(solver) == "rigid") {
+            EXPECT_LE(through, 0.5);
+        }
         EXPECT_GT((moved.vertices[a] - A).norm() / h, 4); // each went half its way or so
         EXPECT_EQ(volume_report.edits[0].constraints[0].kind, "connect");
     }

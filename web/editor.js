@@ -126,7 +126,7 @@
   // A model with a texture (or vertex colours) is shown with it wherever its geometry carries texture coordinates
   // (or colours): the model, and full results (drag previews carry none, and show in the plain colour).
   const plain = new Map([[sourceMesh, sourceMesh.material], [resultMesh, resultMesh.material]]);
-  let modelTexture = null, texturedMaterial = null, colouredMaterial = null;
+  let texturedMaterial = null, colouredMaterial = null;
   function dress(mesh) {
     const g = mesh.geometry.attributes;
     const material = g.uv && texturedMaterial ? texturedMaterial : g.color && colouredMaterial ? colouredMaterial : plain.get(mesh);
@@ -787,12 +787,7 @@
     modelName = facts.name || 'model';
     document.getElementById('model-name').textContent = modelName;
     model = Viewer.parsePly(await response.arrayBuffer());
-    if (facts.texture && model.attributes.uv) {
-      // Fetched with the token (an <img> could not send it), then handed to three.js as an object URL.
-      const url = URL.createObjectURL(await (await Viewer.api('/api/texture')).blob());
-      modelTexture = await new Promise((resolve, reject) => new THREE.TextureLoader().load(url, resolve, undefined, reject));
-      texturedMaterial = Viewer.material(0xffffff, { map: modelTexture });
-    }
+    if (facts.texture && model.attributes.uv) texturedMaterial = Viewer.material(0xffffff, { map: await Viewer.texture('/api/texture') });
     if (model.attributes.color) colouredMaterial = Viewer.material(0xffffff, { vertexColors: true });
     resultMesh.geometry = model;
     dress(resultMesh);

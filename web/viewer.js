@@ -13,6 +13,13 @@ Viewer.api = function (path, init) {
   return fetch(path, init);
 };
 
+/// A texture from the server's API as a three.js texture: fetched with the token (an <img> could not send it), then
+/// handed to three.js as an object URL.
+Viewer.texture = async function (path) {
+  const url = URL.createObjectURL(await (await Viewer.api(path)).blob());
+  return new Promise((resolve, reject) => new THREE.TextureLoader().load(url, resolve, undefined, reject));
+};
+
 /// Binary little-endian PLY as voxwarp writes it (float x y z, optionally float s t and uchar red green blue, then
 /// faces as a uchar count and int indices; polygons are fanned) into a BufferGeometry, with a uv attribute and
 /// vertex colours when the file has them.

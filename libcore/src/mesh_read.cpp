@@ -40,6 +40,14 @@ private:
     std::size_t at_ = 0, number_ = 0;
 };
 
+/// The rest of a line without the whitespace around it: a name that may hold spaces (usemtl's, as newmtl's name in
+/// the library is read; g's and o's).
+std::string rest_of(std::string_view line) {
+    while (!line.empty() && space(line.front())) line.remove_prefix(1);
+    while (!line.empty() && space(line.back())) line.remove_suffix(1);
+    return std::string(line);
+}
+
 /// The next whitespace-separated token of `line` (consumed); empty at its end.
 std::string_view token(std::string_view& line) {
     std::size_t b = 0;
@@ -171,22 +179,17 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
                 }
             }
         } else if (keyword == "usemtl") {
-            // The rest of the line, as newmtl's name in the library is read (names may hold spaces).
-            while (!line.empty() && space(line.front())) line.remove_prefix(1);
-            while (!line.empty() && space(line.back())) line.remove_suffix(1);
-            std::string name(line);
+            const std::string name = rest_of(line);
             const auto [it, added] = material_ids.try_emplace(name, std::int32_t(mesh.materials.size()));
             if (added) mesh.materials.push_back(Material{name});
             material = it->second;
         } else if (keyword == "g" || keyword == "o") {
             // The faces after it belong to the group (or object) the rest of the line names; "g" alone: to none.
-            while (!line.empty() && space(line.front())) line.remove_prefix(1);
-            while (!line.empty() && space(line.back())) line.remove_suffix(1);
-            if (line.empty()) {
+            const std::string name = rest_of(line);
+            if (name.empty()) {
                 group = -1;
                 continue;
             }
-            std::string name(line);
             const auto [it, added] = group_ids.try_emplace(name, std::int32_t(mesh.groups.size()));
             if (added) mesh.groups.push_back(name);
             group = it->second;

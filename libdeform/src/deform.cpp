@@ -44,6 +44,7 @@ std::string kind_name(ConstraintKind k) {
 }
 
 constexpr int kRegionPoints = 32; // material points a region's rigid motion is imposed on
+constexpr double kPlateReach = 1.5; // voxels: a frame this near the model's surface grips it as a plate
 
 /// The model's surface near a point: its nearest point and the outward normal there; {point, zero} when there is
 /// no surface within reach.
@@ -388,7 +389,7 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
         const Eigen::Vector3d lo = voxmap.origin(), hi = voxmap.world(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1));
         check_near(constraints, lo, hi, options.far_fraction);
         std::vector<int> owner;
-        const std::vector<Constraint> rows = expand_entries(constraints, material_of(voxmap), nearest_of(voxmap), 1.5 * h, owner);
+        const std::vector<Constraint> rows = expand_entries(constraints, material_of(voxmap), nearest_of(voxmap), kPlateReach * h, owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;
@@ -569,7 +570,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         const std::vector<Constraint> rows = expand_entries(constraints, material_of(out), [&](const Eigen::Vector3d& p) {
             if (!surface) surface = std::make_unique<SourceSurface>(out);
             return nearest_on(*surface, p, kMissReach * frame.voxel_size);
-        }, 1.5 * frame.voxel_size, owner);
+        }, kPlateReach * frame.voxel_size, owner);
         EditReport er;
         er.solver = to_string(edit.solver);
         er.preserve_volume = edit.preserve_volume;

@@ -18,11 +18,12 @@ namespace {
 /// and the same texture coordinates at both ends (or none on both sides).
 std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
     const auto& tris = input.triangles;
-    const bool uvs = !input.triangle_uvs.empty(), materials = !input.triangle_materials.empty();
+    const bool uvs = !input.triangle_uvs.empty();
     auto uv = [&](std::size_t t, std::size_t c) { return uvs ? input.triangle_uvs[t][c] : -1; };
     auto same_uv = [&](std::int32_t a, std::int32_t b) { return a == b || (a >= 0 && b >= 0 && input.uvs[std::size_t(a)] == input.uvs[std::size_t(b)]); };
-    auto material = [&](std::size_t t) { return materials ? input.triangle_materials[t] : -1; };
-    auto group = [&](std::size_t t) { return input.triangle_groups.empty() ? -1 : input.triangle_groups[t]; };
+    auto same = [](const std::vector<std::int32_t>& of_triangle, std::size_t p, std::size_t q) { // a material or group
+        return of_triangle.empty() || of_triangle[p] == of_triangle[q];
+    };
     internal::DisjointSets sets(tris.size());
     struct Side { // the first triangle seen on an edge, and its texture coordinates at the edge's lower and higher vertex
         std::size_t triangle;
@@ -38,7 +39,9 @@ std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
             const std::uint64_t key = (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
             const auto [it, added] = first.try_emplace(key, Side{t, ua, ub});
             const Side& s = it->second;
-            if (!added && material(s.triangle) == material(t) && group(s.triangle) == group(t) && same_uv(s.uv_low, ua) && same_uv(s.uv_high, ub)) sets.join(t, s.triangle);
+            if (!added && same(input.triangle_materials, s.triangle, t) && same(input.triangle_groups, s.triangle, t) && same_uv(s.uv_low, ua) &&
+                same_uv(s.uv_high, ub))
+                sets.join(t, s.triangle);
         }
     std::vector<std::int32_t> chart(tris.size());
     std::unordered_map<std::size_t, std::int32_t> ids;
@@ -106,15 +109,6 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     };
 
     const std::vector<std::int32_t> chart = charts_of(input);
-    std::vector<std::int32_t> chart_material, chart_group; // one material and one group per chart
-    if (!input.triangle_materials.empty()) {
-        chart_material.assign(in_tris.size(), -1);
-        for (std::size_t t = 0; t < in_tris.size(); ++t) chart_material[std::size_t(chart[t])] = input.triangle_materials[t];
-    }
-    if (!input.triangle_groups.empty()) {
-        chart_group.assign(in_tris.size(), -1);
-        for (std::size_t t = 0; t < in_tris.size(); ++t) chart_group[std::size_t(chart[t])] = input.triangle_groups[t];
-    }
 
     // Each vertex's source point seen from every chart it touches: its own face's, and, where the point lies on an
     // edge or a corner of that face (on a seam, as snapping leaves vertices there), the faces across it.
@@ -318,14 +312,16 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
             output.colours[v] = c.cwiseMax(0.0f).cwiseMin(1.0f);
         });
     }
-    if (!input.triangle_materials.empty()) {
-        output.triangle_materials.resize(pieces.size());
-        for (std::size_t f = 0; f < pieces.size(); ++f) output.triangle_materials[f] = pieces[f].chart >= 0 ? chart_material[std::size_t(pieces[f].chart)] : -1;
-    }
-    if (!input.triangle_groups.empty()) {
-        output.triangle_groups.resize(pieces.size());
-        for (std::size_t f = 0; f < pieces.size(); ++f) output.triangle_groups[f] = pieces[f].chart >= 0 ? chart_group[std::size_t(pieces[f].chart)] : -1;
-    }
+    // A triangle's material and group, which no chart crosses: each output triangle takes its chart's.
+    auto by_chart = [&](const std::vector<std::int32_t>& of_input, std::vector<std::int32_t>& of_output) {
+        if (of_input.empty()) return;
+        std::vector<std::int32_t> of_chart(in_tris.size(), -1);
+        for (std::size_t t = 0; t < in_tris.size(); ++t) of_chart[std::size_t(chart[t])] = of_input[t];
+        of_output.resize(pieces.size());
+        for (std::size_t f = 0; f < pieces.size(); ++f) of_output[f] = pieces[f].chart >= 0 ? of_chart[std::size_t(pieces[f].chart)] : -1;
+    };
+    by_chart(input.triangle_materials, output.triangle_materials);
+    by_chart(input.triangle_groups, output.triangle_groups);
     if (!input.triangle_uvs.empty()) {
         output.triangle_uvs.assign(pieces.size(), {-1, -1, -1});
         // (vertex, chart) -> its texture coordinate's index: corners of one vertex in one chart share it.

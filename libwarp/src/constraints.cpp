@@ -155,11 +155,7 @@ ConstraintRows constraint_rows(const Lattice& rest, const std::vector<Constraint
             const Eigen::Matrix3d inverse = rest.jacobian(stu).inverse();
             rest.second_derivative_weights(stu, inverse * k.direction, inverse * k.across, region, w);
             add_terms(region, w, length * length);
-            Eigen::Vector3d undeformed = Eigen::Vector3d::Zero();
-            for (int kk = 0; kk < 4; ++kk)
-                for (int j = 0; j < 4; ++j)
-                    for (int i = 0; i < 4; ++i) undeformed += w[std::size_t(i + 4 * (j + 4 * kk))] * rest.point(region[0] + i, region[1] + j, region[2] + kk);
-            out.D.row(c) = (length * length * (k.rotation - Eigen::Matrix3d::Identity()) * undeformed).transpose();
+            out.D.row(c) = (length * length * (k.rotation - Eigen::Matrix3d::Identity()) * rest.combine(region, w)).transpose();
             continue;
         }
         rest.weights(stu, region, w);

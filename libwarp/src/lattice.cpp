@@ -136,15 +136,19 @@ void Lattice::second_derivative_weights(const Eigen::Vector3d& stu, const Eigen:
         }
 }
 
-Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {
-    std::array<int, 3> r;
-    std::array<double, 64> w;
-    weights(stu, r, w);
+Eigen::Vector3d Lattice::combine(const std::array<int, 3>& r, const std::array<double, 64>& w) const {
     Eigen::Vector3d p = Eigen::Vector3d::Zero();
     for (int k = 0; k < 4; ++k)
         for (int j = 0; j < 4; ++j)
             for (int i = 0; i < 4; ++i) p += w[std::size_t(i + 4 * (j + 4 * k))] * point(r[0] + i, r[1] + j, r[2] + k);
     return p;
+}
+
+Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {
+    std::array<int, 3> r;
+    std::array<double, 64> w;
+    weights(stu, r, w);
+    return combine(r, w);
 }
 
 Eigen::Matrix3d Lattice::jacobian(const Eigen::Vector3d& stu) const {

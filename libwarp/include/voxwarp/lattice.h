@@ -73,6 +73,9 @@ public:
     void weights(const Eigen::Vector3d& stu, std::array<int, 3>& region, std::array<double, 64>& weights) const;
     /// The 64 weights of B's derivative at stu along the parameter direction `dstu`: sum_i w_i P_i = J(stu) dstu.
     void derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector3d& dstu, std::array<int, 3>& region, std::array<double, 64>& weights) const;
+    /// The 64 control points of `region` weighted by `weights` (as weights() and its kin give them) and summed: a
+    /// point, a derivative or a second derivative of B, by the weights.
+    Eigen::Vector3d combine(const std::array<int, 3>& region, const std::array<double, 64>& weights) const;
     /// The 64 weights of B's second derivative at stu along the parameter directions `a` and `b`:
     /// sum_i w_i P_i = sum_pq a_p b_q d^2 B / d(stu)_p d(stu)_q.
     void second_derivative_weights(const Eigen::Vector3d& stu, const Eigen::Vector3d& a, const Eigen::Vector3d& b, std::array<int, 3>& region,
