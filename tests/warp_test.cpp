@@ -118,6 +118,25 @@ TEST(Warp, UniformScaleByTwoMultipliesVolumeByEight) {
     EXPECT_LE(sum / double(mesh.vertices.size()) / input.voxel_size, 0.25);
 }
 
+TEST(Warp, AStretchPastTheMemoryLimitIsRefused) {
+    // Scaled twelvefold, the sphere's band grows to some ten million target cells (about 80 MiB of accumulators)
+    // although its block tables stay small: only the band's growth can tell.
+    const Voxmap input = sphere_voxmap();
+    const WarpDomain domain = make_domain(input, {});
+    Lattice scaled = domain.lattice;
+    const Eigen::Vector3d centre(0.1, -0.2, 0.3);
+    for (auto& p : scaled.points()) p = centre + 12.0 * (p - centre);
+    try {
+        warp(domain, scaled, {.max_memory_bytes = 16u << 20});
+        ADD_FAILURE() << "a warp needing more than 16 MiB went through";
+    } catch (const ResourceLimit& e) {
+        EXPECT_NE(std::string(e.what()).find("16.00 MiB"), std::string::npos) << e.what();
+    }
+    // Within a limit it can keep, the same warp goes through.
+    const SparseVoxmap out = warp(domain, scaled, {.max_memory_bytes = 1ull << 30});
+    EXPECT_GT(out.bytes(), std::uint64_t(1) << 20);
+}
+
 TEST(Warp, RotatedBoxMatchesTheRotatedBox) {
     const Eigen::Vector3d lo(-1, -0.6, -0.4), hi(1, 0.6, 0.4);
     const Voxmap input = voxelize(test::box_mesh(lo, hi, 8), {.resolution = 48});

@@ -434,7 +434,8 @@ SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const Defo
             if (features) push_feature_surface(domain.lattice, solution.lattice, *features); // the sharp parts go with the space
             if (probe) probe->push(domain.lattice, solution.lattice, int(e));
             if (steps) steps->push_back({domain.lattice, solution.lattice});
-            voxmap = warp(std::move(domain), solution.lattice, {.preview = options.preview, .progress = options.progress});
+            voxmap = warp(std::move(domain), solution.lattice,
+                          {.preview = options.preview, .max_memory_bytes = options.voxelize.max_memory_bytes, .progress = options.progress});
             report.seconds_warp += seconds_since(t);
             progress.report(double(s + 1) / er.steps);
         }

@@ -90,8 +90,11 @@ public:
     Box box;
     Index3 blocks{0, 0, 0}; // per axis
 
-    void reset(const Box& b) {
+    /// `limit_bytes`: what the cells may take in all (the chunks, as they are allocated).
+    void reset(const Box& b, std::uint64_t limit_bytes) {
         box = b;
+        limit_ = limit_bytes;
+        allocated_ = 0;
         for (std::size_t a = 0; a < 3; ++a) blocks[a] = (b.hi[a] - b.lo[a] + kSide) / kSide;
         table_ = std::vector<std::atomic<Cell*>>(std::size_t(blocks[0] * blocks[1] * blocks[2]));
         chunks_.clear();
@@ -128,6 +131,12 @@ private:
         if (arena.spare) return std::exchange(arena.spare, nullptr);
         if (arena.next == arena.end) {
             const std::size_t bytes = kChunkBlocks * kCells * sizeof(Cell);
+            // Checked as the band grows, since no bound known beforehand is tight: a fold-free map that stretches
+            // a wall over hundreds of voxels fills every cell it crosses.
+            const std::uint64_t total = allocated_.fetch_add(bytes) + bytes;
+            if (total > limit_)
+                throw ResourceLimit("warp: the warped surface band needs more than " + format_bytes(total) + ", the limit (--max-memory, or 90% of available memory) being " +
+                                    format_bytes(limit_) + "; the map stretches space too far for this resolution: lower it, split the edit, or raise --max-memory");
             std::unique_ptr<Cell[], ReleaseCells> chunk(static_cast<Cell*>(allocate_large(bytes)), ReleaseCells{bytes});
             arena.next = chunk.get();
             arena.end = arena.next + kChunkBlocks * kCells;
@@ -141,6 +150,8 @@ private:
     }
 
     std::vector<std::atomic<Cell*>> table_;
+    std::uint64_t limit_ = std::numeric_limits<std::uint64_t>::max();
+    std::atomic<std::uint64_t> allocated_{0};
     std::vector<std::unique_ptr<Cell[], ReleaseCells>> chunks_;
     std::mutex mutex_;
     tbb::enumerable_thread_specific<Arena> arenas_;
@@ -643,6 +654,7 @@ struct Warp::State {
     explicit State(std::shared_ptr<const WarpDomain> d) : domain_ptr(std::move(d)), domain(*domain_ptr) {}
     Lattice lattice;
     WarpOptions options;
+    std::uint64_t memory_limit = 0; // options.max_memory_bytes, or 90% of what was available when the warp began
     std::unique_ptr<Splatter> splatter;
     std::vector<Box> boxes; // per region, what its current splat touches
     BlockAccumulator acc;
@@ -799,10 +811,10 @@ struct Warp::State {
         // tables (a map that stretches space far could ask for more than there is).
         std::uint64_t blocks = 1;
         for (std::size_t i = 0; i < 3; ++i) blocks *= std::uint64_t((bound.hi[i] - bound.lo[i]) / BlockAccumulator::kSide + 1);
-        require_memory(blocks * (sizeof(std::atomic<Cell*>) + sizeof(float) + sizeof(void*)), 0,
+        require_memory(blocks * (sizeof(std::atomic<Cell*>) + sizeof(float) + sizeof(void*)), options.max_memory_bytes,
                        "warp target of " + std::to_string(bound.hi[0] - bound.lo[0] + 1) + "x" + std::to_string(bound.hi[1] - bound.lo[1] + 1) + "x" +
                            std::to_string(bound.hi[2] - bound.lo[2] + 1) + " voxels");
-        acc.reset(bound);
+        acc.reset(bound, memory_limit);
         carried.assign(splatter->region_count(), {});
         if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
         if (consumed) consumed->voxmap = SparseVoxmap(); // the splat was its last use: free it before the result grows
@@ -829,6 +841,11 @@ Warp::Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, con
     if (lattice.size() != s.domain.lattice.size()) throw InvalidInput("warp: the lattice's size differs from the domain's");
     s.lattice = lattice;
     s.options = options;
+    s.memory_limit = options.max_memory_bytes;
+    if (s.memory_limit == 0) {
+        s.memory_limit = available_memory_bytes() / 10 * 9;
+        if (s.memory_limit == 0) s.memory_limit = std::numeric_limits<std::uint64_t>::max(); // unknown: nothing to check against
+    }
     s.splatter = std::make_unique<Splatter>(s.domain, s.domain.target_origin, s.domain.target_voxel_size);
     s.boxes.resize(s.splatter->region_count());
     Progress progress(options.progress, "warp");

@@ -71,6 +71,10 @@ WarpDomain make_domain(const Voxmap& input, const LatticeSpec& spec, std::uint64
 
 struct WarpOptions {
     bool preview = false; ///< the paper's "map and round off": each voxel centre lands in one target voxel (fast, aliased)
+    /// Refuse (ResourceLimit) a target whose block tables, or whose splatted band as it grows, would take more than
+    /// this many bytes; 0 = 90 % of the memory available when the warp starts. A map that stretches space far can
+    /// ask for far more than its input took.
+    std::uint64_t max_memory_bytes = 0;
     ProgressCallback progress;
 };
 
@@ -105,7 +109,8 @@ public:
 
     /// Move control point (i, j, k) to `position` (world units) and update the target incrementally.
     /// If the moved regions now reach outside the target's bounds, the target grows and is recomputed in full.
-    /// @throw InvalidInput for an index outside the lattice or a non-finite position.
+    /// @throw InvalidInput for an index outside the lattice or a non-finite position; ResourceLimit when the target
+    ///        would outgrow WarpOptions::max_memory_bytes (the warp is then spoilt: build a new one).
     void move_control_point(int i, int j, int k, const Eigen::Vector3d& position);
 
     const Lattice& lattice() const;
