@@ -104,7 +104,8 @@ void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script,
     report.seconds_write = seconds_since(t);
     finish(global, a, report, start);
     std::string carried;
-    for (const auto& [has, what] : {std::pair{!out.triangle_uvs.empty(), "texture coordinates"}, std::pair{!out.colours.empty(), "colours"},
+    for (const auto& [has, what] : {std::pair{!out.triangle_uvs.empty(), "texture coordinates"}, std::pair{!out.triangle_normals.empty(), "normals"},
+                                    std::pair{!out.colours.empty(), "colours"},
                                     std::pair{!out.materials.empty(), "materials"}, std::pair{!out.triangle_groups.empty(), "groups"}})
         if (has) carried += (carried.empty() ? " (with its " : ", ") + std::string(what);
     note(global, "wrote " + a.output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces" +

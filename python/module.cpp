@@ -205,7 +205,8 @@ py::tuple arrays_from_mesh(TriangleMesh&& mesh) {
 }
 
 /// A mesh's attributes as a dict of numpy arrays (the keys it has): "uv" float64 (k, 2), "uv_index" int32 (m, 3)
-/// (each triangle's corners' rows of uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,)
+/// (each triangle's corners' rows of uv, -1: none), "normal" float64 (k, 3) and "normal_index" int32 (m, 3) likewise
+/// (per-corner shading normals), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,)
 /// (index into "materials", -1: none), "materials": a list of dicts (name, diffuse, texture, statements), "group" int32
 /// (m,) (index into "groups", -1: none), "groups": a list of names (OBJ's g and o).
 py::dict attributes_dict(TriangleMesh& mesh) {
@@ -214,6 +215,10 @@ py::dict attributes_dict(TriangleMesh& mesh) {
     if (!mesh.triangle_uvs.empty()) {
         a["uv"] = adopt<double>(std::move(mesh.uvs), 2);
         a["uv_index"] = adopt<std::int32_t>(std::move(mesh.triangle_uvs), 3);
+    }
+    if (!mesh.triangle_normals.empty()) {
+        a["normal"] = adopt<double>(std::move(mesh.normals), 3);
+        a["normal_index"] = adopt<std::int32_t>(std::move(mesh.triangle_normals), 3);
     }
     if (!mesh.colours.empty()) a["colour"] = adopt<float>(std::move(mesh.colours), 3);
     if (!mesh.triangle_materials.empty()) a["material"] = adopt<std::int32_t>(std::move(mesh.triangle_materials), 1).attr("reshape")(-1);
@@ -247,6 +252,13 @@ void attributes_from(const py::handle& attributes, TriangleMesh& mesh) {
         const auto index = rows("uv_index", 3, std::int32_t{});
         for (py::ssize_t i = 0; i < uv.shape(0); ++i) mesh.uvs.emplace_back(uv.at(i, 0), uv.at(i, 1));
         for (py::ssize_t i = 0; i < index.shape(0); ++i) mesh.triangle_uvs.push_back({index.at(i, 0), index.at(i, 1), index.at(i, 2)});
+    }
+    if (a.contains("normal") != a.contains("normal_index")) throw InvalidInput("attributes: \"normal\" and \"normal_index\" go together");
+    if (a.contains("normal")) {
+        const auto normal = rows("normal", 3, double{});
+        const auto index = rows("normal_index", 3, std::int32_t{});
+        for (py::ssize_t i = 0; i < normal.shape(0); ++i) mesh.normals.emplace_back(normal.at(i, 0), normal.at(i, 1), normal.at(i, 2));
+        for (py::ssize_t i = 0; i < index.shape(0); ++i) mesh.triangle_normals.push_back({index.at(i, 0), index.at(i, 1), index.at(i, 2)});
     }
     if (a.contains("colour")) {
         const auto c = rows("colour", 3, float{});

@@ -345,6 +345,149 @@ TEST(Attributes, ObjGroupsAreReadWrittenAndCarriedThroughARemesh) {
     EXPECT_EQ(wrong, 0u);
 }
 
+/// The cube of side 2 at the origin with flat-shaded normals: each side's corners index that side's outward normal
+/// (normal 2 axis + (sign > 0)), so every edge of the cube is a hard edge.
+TriangleMesh hard_edged_cube() {
+    TriangleMesh cube = test::box_mesh(Eigen::Vector3d::Constant(-1), Eigen::Vector3d::Constant(1), 4);
+    for (int k = 0; k < 6; ++k) cube.normals.push_back((k % 2 ? 1.0 : -1.0) * Eigen::Vector3d::Unit(k / 2));
+    for (const auto& t : cube.triangles) {
+        const Eigen::Vector3d n = (cube.vertices[std::size_t(t[1])] - cube.vertices[std::size_t(t[0])]).cross(cube.vertices[std::size_t(t[2])] - cube.vertices[std::size_t(t[0])]);
+        Eigen::Index axis = 0;
+        n.cwiseAbs().maxCoeff(&axis);
+        const auto side = std::int32_t(2 * axis + (n[axis] > 0));
+        cube.triangle_normals.push_back({side, side, side});
+    }
+    return cube;
+}
+
+/// Angles (degrees) between each output corner's normal and the output surface's own normal at its vertex (area
+/// weighted over the faces around it).
+std::vector<double> normal_angles(const TriangleMesh& out) {
+    std::vector<Eigen::Vector3d> geometric(out.vertices.size(), Eigen::Vector3d::Zero());
+    for (const auto& t : out.triangles) {
+        const Eigen::Vector3d n = (out.vertices[std::size_t(t[1])] - out.vertices[std::size_t(t[0])]).cross(out.vertices[std::size_t(t[2])] - out.vertices[std::size_t(t[0])]);
+        for (const auto v : t) geometric[std::size_t(v)] += n;
+    }
+    std::vector<double> angles;
+    for (std::size_t f = 0; f < out.triangles.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c) {
+            const Eigen::Vector3d& n = out.normals[std::size_t(out.triangle_normals[f][c])];
+            const Eigen::Vector3d g = geometric[std::size_t(out.triangles[f][c])].normalized();
+            angles.push_back(std::acos(std::clamp(n.dot(g), -1.0, 1.0)) * 180 / M_PI);
+        }
+    std::sort(angles.begin(), angles.end());
+    return angles;
+}
+
+TEST(Attributes, NormalsAreReadWrittenAndKeepHardEdgesThroughARemesh) {
+    const fs::path dir = scratch("normals");
+    const TriangleMesh cube = hard_edged_cube();
+    // OBJ as v//vn, and with texture coordinates as v/vt/vn; glTF, whose vertices split at the hard edges and weld
+    // again on reading. Each corner comes back with its side's normal.
+    TriangleMesh textured = cube;
+    textured.uvs = {Eigen::Vector2d(0.25, 0.5)};
+    textured.triangle_uvs.assign(cube.triangles.size(), {0, 0, 0});
+    for (const auto& [mesh, name] : {std::pair{&cube, "cube.obj"}, std::pair{static_cast<const TriangleMesh*>(&textured), "textured.obj"}, std::pair{&cube, "cube.glb"}}) {
+        SCOPED_TRACE(name);
+        write_mesh(*mesh, (dir / name).string());
+        const TriangleMesh back = read_mesh((dir / name).string());
+        ASSERT_EQ(back.vertices.size(), cube.vertices.size());
+        ASSERT_EQ(back.triangle_normals.size(), cube.triangles.size());
+        EXPECT_TRUE(topology(back).watertight());
+        for (std::size_t f = 0; f < back.triangles.size(); ++f)
+            for (std::size_t c = 0; c < 3; ++c) {
+                const auto& t = back.triangles[f];
+                const Eigen::Vector3d middle = (back.vertices[std::size_t(t[0])] + back.vertices[std::size_t(t[1])] + back.vertices[std::size_t(t[2])]) / 3;
+                Eigen::Index axis = 0;
+                middle.cwiseAbs().maxCoeff(&axis);
+                EXPECT_LE((back.normals[std::size_t(back.triangle_normals[f][c])] - middle[axis] / std::abs(middle[axis]) * Eigen::Vector3d::Unit(axis)).norm(), 1e-6);
+            }
+    }
+    // A hand-written OBJ: vn need not be unit length; an index past the normals read is refused with its line.
+    write_text(dir / "hand.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 2\nf 1/1/1 2//1 3/1/1\n");
+    const TriangleMesh hand = read_mesh((dir / "hand.obj").string());
+    ASSERT_EQ(hand.normals.size(), 1u);
+    EXPECT_EQ(hand.normals[0], Eigen::Vector3d::UnitZ());
+    ASSERT_EQ(hand.triangle_normals.size(), 1u);
+    EXPECT_EQ(hand.triangle_normals[0], (std::array<std::int32_t, 3>{0, 0, 0}));
+    EXPECT_TRUE(hand.triangle_uvs.empty()); // one corner named none
+    write_text(dir / "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n");
+    try {
+        read_mesh((dir / "bad.obj").string());
+        ADD_FAILURE() << "a normal index past the file's normals was read";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("bad.obj: line 5: face refers to normal 2, file has 1"), std::string::npos) << e.what();
+    }
+
+    // Remeshed at 32: the output is cut along the hard edges, and every corner carries the normal of the side it
+    // lies on: exactly one of the six, and, at least a voxel from the cube's edges, the side's own.
+    DeformOptions options;
+    options.voxelize.resolution = 32;
+    DeformReport report;
+    const TriangleMesh out = deform_mesh(cube, EditScript{}, options, report);
+    ASSERT_EQ(out.triangle_normals.size(), out.triangles.size());
+    EXPECT_TRUE(topology(out).watertight());
+    const double h = report.voxel_size;
+    std::size_t wrong = 0, unlike = 0, checked = 0;
+    for (std::size_t f = 0; f < out.triangles.size(); ++f) {
+        const auto& t = out.triangles[f];
+        const Eigen::Vector3d middle = (out.vertices[std::size_t(t[0])] + out.vertices[std::size_t(t[1])] + out.vertices[std::size_t(t[2])]) / 3;
+        Eigen::Index axis = 0;
+        const double farthest = middle.cwiseAbs().maxCoeff(&axis);
+        const Eigen::Vector3d side = middle[axis] / std::abs(middle[axis]) * Eigen::Vector3d::Unit(axis);
+        int sides_near = 0;
+        for (int k = 0; k < 3; ++k) sides_near += std::abs(middle[k]) > farthest - h;
+        for (std::size_t c = 0; c < 3; ++c) {
+            const Eigen::Vector3d& n = out.normals[std::size_t(out.triangle_normals[f][c])];
+            unlike += std::abs(n.cwiseAbs().maxCoeff() - 1) > 1e-9;
+            // One triangle's corners agree (none reaches across the hard edge).
+            unlike += (n - out.normals[std::size_t(out.triangle_normals[f][0])]).norm() > 1e-9;
+            if (sides_near == 1) ++checked, wrong += (n - side).norm() > 1e-9;
+        }
+    }
+    std::printf("hard-edged cube remeshed at 32: %zu triangles, %zu corners checked against their side, %zu wrong, %zu not one side's\n",
+                out.triangles.size(), checked, wrong, unlike);
+    EXPECT_GT(checked, out.triangles.size());
+    EXPECT_EQ(wrong, 0u);
+    EXPECT_EQ(unlike, 0u);
+}
+
+TEST(Attributes, NormalsTurnWithTheWarp) {
+    // A smooth sphere (radial normals) with one side pulled out and up: where the surface stretches and turns, the
+    // carried normals must turn with it. Measured against the output surface's own vertex normals, in the
+    // deform (re-polygonized) and in vertex mode; the same normals left as the input had them show what the turn is.
+    TriangleMesh sphere = test::sphere_mesh(Eigen::Vector3d::Zero(), 1.0, 4);
+    for (const auto& v : sphere.vertices) sphere.normals.push_back(v.normalized());
+    sphere.triangle_normals = sphere.triangles;
+    const fs::path dir = scratch("turn");
+    write_text(dir / "pull.json", R"({ "lattice": { "size": 7 }, "edits": [ { "constraints": [
+        { "pin": [-1, 0, 0] }, { "move": [1, 0, 0], "to": [1.6, 0.5, 0] } ] } ] })");
+    const EditScript script = read_edit_file((dir / "pull.json").string());
+    DeformOptions options;
+    options.voxelize.resolution = 48;
+    for (const bool vertex_mode : {false, true}) {
+        SCOPED_TRACE(vertex_mode ? "vertex mode" : "deform");
+        DeformReport report;
+        const TriangleMesh out = vertex_mode ? deform_vertices(sphere, script, options, report) : deform_mesh(sphere, script, options, report);
+        ASSERT_EQ(out.triangle_normals.size(), out.triangles.size());
+        const std::vector<double> turned = normal_angles(out);
+        // The same output with its normals as the input had them at each corner's source (no turn).
+        TriangleMesh unturned = out;
+        if (vertex_mode) {
+            unturned.normals = sphere.normals, unturned.triangle_normals = sphere.triangle_normals;
+        } else {
+            transfer_attributes(unturned, SourceSurface(sphere), find_sources(unturned, sphere, {}, {.voxel_size = report.voxel_size, .reach_voxels = 1e6}));
+        }
+        const std::vector<double> kept = normal_angles(unturned);
+        auto at = [](const std::vector<double>& a, double q) { return a[std::size_t(q * double(a.size() - 1))]; };
+        std::printf("%s: angle to the surface's normal, median / p99 / max: carried %.3f / %.3f / %.3f degrees, unturned %.3f / %.3f / %.3f\n",
+                    vertex_mode ? "vertex mode" : "deform", at(turned, 0.5), at(turned, 0.99), turned.back(), at(kept, 0.5), at(kept, 0.99), kept.back());
+        EXPECT_LE(at(turned, 0.5), 1.0);
+        EXPECT_LE(at(turned, 0.99), 4.0);
+        EXPECT_GE(at(kept, 0.99), 3 * at(turned, 0.99)); // the edit does turn them
+    }
+}
+
 TEST(Attributes, PlyKeepsColoursAndTextureCoordinatesSplitAtSeams) {
     const fs::path dir = scratch("ply");
     const TriangleMesh box = textured_box();

@@ -1,5 +1,5 @@
-// glTF 2.0 (.gltf, .glb) through Debian's tinygltf: positions, texture coordinates (TEXCOORD_0), vertex colours
-// (COLOR_0) and materials (base colour and its texture) in and out. glTF splits vertices where texture coordinates
+// glTF 2.0 (.gltf, .glb) through Debian's tinygltf: positions, texture coordinates (TEXCOORD_0), normals (NORMAL), vertex colours
+// (COLOR_0) and materials (base colour and its texture) in and out. glTF splits vertices where texture coordinates or normals
 // differ; reading welds them again by position (exactly equal coordinates), so a closed model stays closed for
 // voxelizing, each corner keeping its own texture coordinate. glTF's texture v runs down the image, OBJ's up:
 // voxwarp keeps OBJ's, flipping on the way in and out.
@@ -160,7 +160,7 @@ TriangleMesh read_gltf(const std::string& path, bool binary, std::vector<std::st
         }
     };
     std::unordered_map<Eigen::Vector3d, std::int32_t, KeyHash> weld;
-    bool any_uv = false, any_colour = false;
+    bool any_uv = false, any_normal = false, any_colour = false;
 
     auto add_primitive = [&](const tinygltf::Primitive& p, const Eigen::Matrix4d& transform, const std::string& where) {
         if (p.mode != -1 && p.mode != TINYGLTF_MODE_TRIANGLES) {
@@ -192,6 +192,19 @@ TriangleMesh read_gltf(const std::string& path, bool binary, std::vector<std::st
             }
             any_uv = true;
         }
+        std::int32_t normal_base = -1;
+        if (const auto t = p.attributes.find("NORMAL"); t != p.attributes.end()) {
+            const AccessorReader normals(model, t->second, path, where + " NORMAL");
+            if (normals.components() != 3 || normals.count() != positions.count()) throw InvalidInput(path + ": " + where + " NORMAL does not match POSITION");
+            const Eigen::Matrix3d to_world = transform.topLeftCorner<3, 3>().inverse().transpose(); // normals go with the inverse transpose
+            normal_base = std::int32_t(mesh.normals.size());
+            for (std::size_t i = 0; i < normals.count(); ++i) {
+                const Eigen::Vector3d n = to_world * Eigen::Vector3d(normals.get(i, 0), normals.get(i, 1), normals.get(i, 2));
+                if (!n.allFinite()) throw InvalidInput(path + ": " + where + " normal " + std::to_string(i) + " is not finite");
+                mesh.normals.push_back(n.norm() > 0 ? Eigen::Vector3d(n.normalized()) : n);
+            }
+            any_normal = true;
+        }
         if (const auto c = p.attributes.find("COLOR_0"); c != p.attributes.end()) {
             const AccessorReader colours(model, c->second, path, where + " COLOR_0");
             if (colours.components() < 3 || colours.count() != positions.count()) throw InvalidInput(path + ": " + where + " COLOR_0 does not match POSITION");
@@ -222,6 +235,9 @@ TriangleMesh read_gltf(const std::string& path, bool binary, std::vector<std::st
             mesh.triangles.push_back({vertex[k[0]], vertex[k[1]], vertex[k[2]]});
             mesh.triangle_uvs.push_back(uv_base < 0 ? std::array<std::int32_t, 3>{-1, -1, -1}
                                                     : std::array<std::int32_t, 3>{uv_base + std::int32_t(k[0]), uv_base + std::int32_t(k[1]), uv_base + std::int32_t(k[2])});
+            mesh.triangle_normals.push_back(normal_base < 0 ? std::array<std::int32_t, 3>{-1, -1, -1}
+                                                            : std::array<std::int32_t, 3>{normal_base + std::int32_t(k[0]), normal_base + std::int32_t(k[1]),
+                                                                                          normal_base + std::int32_t(k[2])});
             mesh.triangle_materials.push_back(m);
         }
     };
@@ -246,6 +262,7 @@ TriangleMesh read_gltf(const std::string& path, bool binary, std::vector<std::st
                 add_primitive(model.meshes[m].primitives[p], Eigen::Matrix4d::Identity(), "mesh " + std::to_string(m) + " primitive " + std::to_string(p));
     }
     if (!any_uv) mesh.uvs.clear(), mesh.triangle_uvs.clear();
+    if (!any_normal) mesh.normals.clear(), mesh.triangle_normals.clear();
     if (!any_colour) mesh.colours.clear();
     else mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
     if (mesh.materials.empty()) mesh.triangle_materials.clear();
@@ -276,14 +293,15 @@ void write_gltf(const TriangleMesh& mesh, const std::string& path, bool binary) 
         return int(model.accessors.size() - 1);
     };
 
-    // glTF keeps texture coordinates per vertex: a vertex on a seam is written once per texture coordinate.
-    const bool uvs = !mesh.triangle_uvs.empty();
+    // glTF keeps texture coordinates and normals per vertex: a vertex on a seam or a hard edge is written once per
+    // (texture coordinate, normal) it has.
+    const bool uvs = !mesh.triangle_uvs.empty(), normals = !mesh.triangle_normals.empty();
     const SeamSplit split = split_at_seams(mesh);
-    const std::vector<std::int32_t>&vertex_of = split.vertex_of, &uv_of = split.uv_of;
+    const std::vector<std::int32_t>&vertex_of = split.vertex_of, &uv_of = split.uv_of, &normal_of = split.normal_of;
     std::vector<std::array<std::uint32_t, 3>> faces(mesh.triangles.size());
     for (std::size_t f = 0; f < faces.size(); ++f)
         for (std::size_t c = 0; c < 3; ++c) faces[f][c] = std::uint32_t(split.triangles[f][c]);
-    std::vector<float> positions, texcoords, colours;
+    std::vector<float> positions, texcoords, normal_values, colours;
     std::vector<double> lo(3, std::numeric_limits<double>::infinity()), hi(3, -std::numeric_limits<double>::infinity());
     for (std::size_t i = 0; i < vertex_of.size(); ++i) {
         const Eigen::Vector3d& p = mesh.vertices[std::size_t(vertex_of[i])];
@@ -295,6 +313,11 @@ void write_gltf(const TriangleMesh& mesh, const std::string& path, bool binary) 
             const Eigen::Vector2d uv = uv_of[i] >= 0 ? mesh.uvs[std::size_t(uv_of[i])] : Eigen::Vector2d::Zero();
             texcoords.push_back(float(uv.x())), texcoords.push_back(float(1.0 - uv.y()));
         }
+        if (normals) { // glTF wants unit normals: a corner without one gets +z
+            const Eigen::Vector3d n = normal_of[i] >= 0 && mesh.normals[std::size_t(normal_of[i])].norm() > 0 ? mesh.normals[std::size_t(normal_of[i])].normalized()
+                                                                                                         : Eigen::Vector3d::UnitZ();
+            for (int a = 0; a < 3; ++a) normal_values.push_back(float(n[a]));
+        }
         if (!mesh.colours.empty())
             for (int a = 0; a < 3; ++a) colours.push_back(mesh.colours[std::size_t(vertex_of[i])][a]);
     }
@@ -305,6 +328,9 @@ void write_gltf(const TriangleMesh& mesh, const std::string& path, bool binary) 
     if (uvs)
         base.attributes["TEXCOORD_0"] =
             accessor(view(texcoords.data(), texcoords.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC2, vertex_of.size());
+    if (normals)
+        base.attributes["NORMAL"] = accessor(view(normal_values.data(), normal_values.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER), TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                             TINYGLTF_TYPE_VEC3, vertex_of.size());
     if (!colours.empty())
         base.attributes["COLOR_0"] =
             accessor(view(colours.data(), colours.size() * 4, TINYGLTF_TARGET_ARRAY_BUFFER), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, vertex_of.size());

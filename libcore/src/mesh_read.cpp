@@ -85,9 +85,10 @@ std::string read_whole(const std::string& path, std::uintmax_t size) {
     return text;
 }
 
-/// Texture coordinate, material and group indices of an OBJ's faces, kept only once a face names one.
+/// Texture coordinate, normal, material and group indices of an OBJ's faces, kept only once a face names one.
 struct ObjAttributes {
     std::vector<std::array<std::int32_t, 3>>& triangle_uvs;
+    std::vector<std::array<std::int32_t, 3>>& triangle_normals;
     std::vector<std::int32_t>& triangle_materials;
     std::vector<std::int32_t>& triangle_groups;
     void groups_for(std::size_t triangles) {
@@ -96,6 +97,9 @@ struct ObjAttributes {
     void uvs_for(std::size_t triangles) {
         if (triangle_uvs.size() < triangles) triangle_uvs.resize(triangles, {-1, -1, -1});
     }
+    void normals_for(std::size_t triangles) {
+        if (triangle_normals.size() < triangles) triangle_normals.resize(triangles, {-1, -1, -1});
+    }
     void materials_for(std::size_t triangles) {
         if (triangle_materials.size() < triangles) triangle_materials.resize(triangles, -1);
     }
@@ -103,15 +107,15 @@ struct ObjAttributes {
 
 TriangleMesh read_obj(const std::string& path, std::string_view text, std::vector<std::string>& libraries) {
     TriangleMesh mesh;
-    ObjAttributes attributes{mesh.triangle_uvs, mesh.triangle_materials, mesh.triangle_groups};
+    ObjAttributes attributes{mesh.triangle_uvs, mesh.triangle_normals, mesh.triangle_materials, mesh.triangle_groups};
     Lines lines(text);
     std::string_view line;
-    std::int64_t max_index = 0, max_uv = 0;
-    std::size_t max_index_line = 0, max_uv_line = 0;
+    std::int64_t max_index = 0, max_uv = 0, max_normal = 0;
+    std::size_t max_index_line = 0, max_uv_line = 0, max_normal_line = 0;
     std::int32_t material = -1, group = -1;
     std::unordered_map<std::string, std::int32_t> group_ids;
     std::unordered_map<std::string, std::int32_t> material_ids;
-    std::vector<std::int32_t> polygon, polygon_uvs;
+    std::vector<std::int32_t> polygon, polygon_uvs, polygon_normals;
     auto bad = [&](const std::string& what) { throw InvalidInput(path + ": line " + std::to_string(lines.number()) + ": " + what); };
     // An OBJ index (1-based, or negative: counted back from the last one read) as 0-based.
     auto index_of = [&](std::int64_t index, std::int64_t count, const char* what, std::int64_t& max, std::size_t& max_line) {
@@ -145,9 +149,15 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
             for (int a = 0; a < 2; ++a)
                 if (!parse_double(token(line), uv[a]) || !std::isfinite(uv[a])) bad("texture coordinate " + std::to_string(mesh.uvs.size() + 1) + " needs two finite numbers");
             mesh.uvs.push_back(uv);
+        } else if (keyword == "vn") {
+            Eigen::Vector3d n;
+            for (int a = 0; a < 3; ++a)
+                if (!parse_double(token(line), n[a]) || !std::isfinite(n[a])) bad("normal " + std::to_string(mesh.normals.size() + 1) + " needs three finite numbers");
+            mesh.normals.push_back(n.norm() > 0 ? Eigen::Vector3d(n.normalized()) : n); // OBJ does not promise unit length
         } else if (keyword == "f") {
             polygon.clear();
             polygon_uvs.clear();
+            polygon_normals.clear();
             for (std::string_view t = token(line); !t.empty(); t = token(line)) {
                 std::int64_t index = 0;
                 std::string_view rest;
@@ -159,15 +169,29 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
                     if (!parse_leading_integer(rest.substr(1), index, after) || (!after.empty() && after[0] != '/'))
                         bad("face vertex '" + std::string(t.substr(0, 40)) + "' has a malformed texture coordinate index");
                     polygon_uvs.push_back(index_of(index, std::int64_t(mesh.uvs.size()), "texture coordinate", max_uv, max_uv_line));
+                    rest = after;
+                } else if (rest.size() > 1) { // v//vn
+                    rest = rest.substr(1);
+                }
+                if (rest.size() > 1) { // /vn
+                    std::string_view after;
+                    if (!parse_leading_integer(rest.substr(1), index, after) || !after.empty())
+                        bad("face vertex '" + std::string(t.substr(0, 40)) + "' has a malformed normal index");
+                    polygon_normals.push_back(index_of(index, std::int64_t(mesh.normals.size()), "normal", max_normal, max_normal_line));
                 }
             }
             if (polygon.size() < 3) bad("face has " + std::to_string(polygon.size()) + " vertices, expected at least 3");
             const bool uvs = polygon_uvs.size() == polygon.size(); // a face that names them for some corners only has none
+            const bool normals = polygon_normals.size() == polygon.size();
             for (std::size_t c = 1; c + 1 < polygon.size(); ++c) {
                 mesh.triangles.push_back({polygon[0], polygon[c], polygon[c + 1]});
                 if (uvs) {
                     attributes.uvs_for(mesh.triangles.size());
                     mesh.triangle_uvs.back() = {polygon_uvs[0], polygon_uvs[c], polygon_uvs[c + 1]};
+                }
+                if (normals) {
+                    attributes.normals_for(mesh.triangles.size());
+                    mesh.triangle_normals.back() = {polygon_normals[0], polygon_normals[c], polygon_normals[c + 1]};
                 }
                 if (material >= 0) {
                     attributes.materials_for(mesh.triangles.size());
@@ -203,12 +227,17 @@ TriangleMesh read_obj(const std::string& path, std::string_view text, std::vecto
     if (std::uint64_t(max_uv) > mesh.uvs.size())
         throw InvalidInput(path + ": line " + std::to_string(max_uv_line) + ": face refers to texture coordinate " + std::to_string(max_uv) + ", file has " +
                            std::to_string(mesh.uvs.size()));
+    if (std::uint64_t(max_normal) > mesh.normals.size())
+        throw InvalidInput(path + ": line " + std::to_string(max_normal_line) + ": face refers to normal " + std::to_string(max_normal) + ", file has " +
+                           std::to_string(mesh.normals.size()));
     if (!mesh.colours.empty()) mesh.colours.resize(mesh.vertices.size(), Eigen::Vector3f::Ones());
     if (!mesh.triangle_uvs.empty()) attributes.uvs_for(mesh.triangles.size());
+    if (!mesh.triangle_normals.empty()) attributes.normals_for(mesh.triangles.size());
     if (!mesh.triangle_materials.empty()) attributes.materials_for(mesh.triangles.size());
     if (!mesh.triangle_groups.empty()) attributes.groups_for(mesh.triangles.size());
     else mesh.groups.clear(); // named, but no face after it
     if (mesh.triangle_uvs.empty()) mesh.uvs.clear();
+    if (mesh.triangle_normals.empty()) mesh.normals.clear();
     return mesh;
 }
 

@@ -19,12 +19,12 @@ std::string read_head(const std::string& path, std::uintmax_t file_size);
 /// Problems that do not stop the reading (a missing material library or texture) go to `warnings`.
 bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh, std::vector<std::string>& warnings);
 
-/// Per-vertex texture coordinates for formats that keep them per vertex (PLY, glTF): a vertex whose corners name
-/// different ones (a seam) is written once per texture coordinate. `vertex_of[i]`: the mesh vertex that written
-/// vertex i copies; `uv_of[i]`: its texture coordinate (-1: none); `triangles` index written vertices. A mesh
-/// without texture coordinates comes back as it is.
+/// Per-vertex texture coordinates and normals for formats that keep them per vertex (PLY, glTF): a vertex whose
+/// corners name different ones (a seam, a hard edge) is written once per (texture coordinate, normal) pair.
+/// `vertex_of[i]`: the mesh vertex that written vertex i copies; `uv_of[i]`, `normal_of[i]`: its texture
+/// coordinate and normal (-1: none); `triangles` index written vertices. A mesh without either comes back as it is.
 struct SeamSplit {
-    std::vector<std::int32_t> vertex_of, uv_of;
+    std::vector<std::int32_t> vertex_of, uv_of, normal_of;
     std::vector<std::array<std::int32_t, 3>> triangles;
 };
 SeamSplit split_at_seams(const TriangleMesh& mesh);

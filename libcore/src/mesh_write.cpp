@@ -23,25 +23,33 @@ SeamSplit split_at_seams(const TriangleMesh& mesh) {
     SeamSplit split;
     split.vertex_of.resize(mesh.vertices.size());
     split.uv_of.assign(mesh.vertices.size(), -1);
+    split.normal_of.assign(mesh.vertices.size(), -1);
     for (std::size_t v = 0; v < mesh.vertices.size(); ++v) split.vertex_of[v] = std::int32_t(v);
-    std::vector<std::vector<std::pair<std::int32_t, std::int32_t>>> copies(mesh.vertices.size()); // (uv, written vertex) beyond the first
+    struct Copy {
+        std::int32_t uv, normal, written;
+    };
+    std::vector<std::vector<Copy>> copies(mesh.vertices.size()); // beyond the first (uv, normal) pair seen at a vertex
+    std::vector<bool> seen(mesh.vertices.size(), false);
     split.triangles = mesh.triangles;
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
         for (std::size_t c = 0; c < 3; ++c) {
-            const std::int32_t v = mesh.triangles[f][c], uv = mesh.triangle_uvs.empty() ? -1 : mesh.triangle_uvs[f][c];
-            if (uv < 0) continue;
-            if (split.uv_of[std::size_t(v)] < 0 || split.uv_of[std::size_t(v)] == uv) {
-                split.uv_of[std::size_t(v)] = uv;
+            const std::int32_t v = mesh.triangles[f][c], uv = mesh.triangle_uvs.empty() ? -1 : mesh.triangle_uvs[f][c],
+                               normal = mesh.triangle_normals.empty() ? -1 : mesh.triangle_normals[f][c];
+            if (uv < 0 && normal < 0) continue;
+            const auto i = std::size_t(v);
+            if (!seen[i] || (split.uv_of[i] == uv && split.normal_of[i] == normal)) {
+                seen[i] = true, split.uv_of[i] = uv, split.normal_of[i] = normal;
                 continue;
             }
             std::int32_t written = -1;
-            for (const auto& [u, w] : copies[std::size_t(v)])
-                if (u == uv) written = w;
+            for (const auto& copy : copies[i])
+                if (copy.uv == uv && copy.normal == normal) written = copy.written;
             if (written < 0) {
                 written = std::int32_t(split.vertex_of.size());
                 split.vertex_of.push_back(v);
                 split.uv_of.push_back(uv);
-                copies[std::size_t(v)].emplace_back(uv, written);
+                split.normal_of.push_back(normal);
+                copies[i].push_back({uv, normal, written});
             }
             split.triangles[f][c] = written;
         }
@@ -137,7 +145,7 @@ Chunks obj(const TriangleMesh& mesh, const std::string& material_library) {
             }
         });
     }
-    if (mesh.triangle_uvs.empty() && mesh.triangle_materials.empty() && mesh.triangle_groups.empty()) {
+    if (mesh.triangle_uvs.empty() && mesh.triangle_normals.empty() && mesh.triangle_materials.empty() && mesh.triangle_groups.empty()) {
         faces_text(mesh.triangles, "f ", 1, chunks);
     } else {
         encode_chunks(mesh.uvs.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
@@ -146,13 +154,20 @@ Chunks obj(const TriangleMesh& mesh, const std::string& material_library) {
                 t.text("vt "), t.number(mesh.uvs[i].x()), t.put(' '), t.number(mesh.uvs[i].y()), t.put('\n');
             }
         });
+        encode_chunks(mesh.normals.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
+            TextChunk t(s, (e - b) * (3 + 3 * 25 + 3));
+            for (std::size_t i = b; i < e; ++i) {
+                const auto& n = mesh.normals[i];
+                t.text("vn "), t.number(n.x()), t.put(' '), t.number(n.y()), t.put(' '), t.number(n.z()), t.put('\n');
+            }
+        });
         auto material = [&](std::size_t f) { return mesh.triangle_materials.empty() ? -1 : mesh.triangle_materials[f]; };
         auto group = [&](std::size_t f) { return mesh.triangle_groups.empty() ? -1 : mesh.triangle_groups[f]; };
         std::size_t longest_name = 0;
         for (const auto& m : mesh.materials) longest_name = std::max(longest_name, m.name.size());
         for (const auto& g : mesh.groups) longest_name = std::max(longest_name, g.size());
         encode_chunks(mesh.triangles.size(), chunks, [&](std::size_t b, std::size_t e, std::string& s) {
-            TextChunk t(s, (e - b) * (2 + 3 * 24 + 2 * (8 + longest_name + 1)));
+            TextChunk t(s, (e - b) * (2 + 3 * 36 + 2 * (8 + longest_name + 1)));
             for (std::size_t f = b; f < e; ++f) {
                 // A group statement where the group changes ("g" alone where a face has none after one that had).
                 if (f == 0 ? group(f) >= 0 : group(f) != group(f - 1)) {
@@ -163,11 +178,16 @@ Chunks obj(const TriangleMesh& mesh, const std::string& material_library) {
                 // A material statement where the material changes, and before the first face that has one.
                 if (material(f) >= 0 && (f == 0 || material(f) != material(f - 1)))
                     t.text("usemtl "), t.text(mesh.materials[std::size_t(material(f))].name), t.put('\n');
-                const bool uvs = !mesh.triangle_uvs.empty() && mesh.triangle_uvs[f][0] >= 0 && mesh.triangle_uvs[f][1] >= 0 && mesh.triangle_uvs[f][2] >= 0;
+                auto all = [f](const std::vector<std::array<std::int32_t, 3>>& of_corner) {
+                    return !of_corner.empty() && of_corner[f][0] >= 0 && of_corner[f][1] >= 0 && of_corner[f][2] >= 0;
+                };
+                const bool uvs = all(mesh.triangle_uvs), normals = all(mesh.triangle_normals);
                 t.text("f ");
                 for (std::size_t c = 0; c < 3; ++c) {
                     t.integer(std::int64_t(mesh.triangles[f][c]) + 1);
-                    if (uvs) t.put('/'), t.integer(std::int64_t(mesh.triangle_uvs[f][c]) + 1);
+                    if (uvs || normals) t.put('/');
+                    if (uvs) t.integer(std::int64_t(mesh.triangle_uvs[f][c]) + 1);
+                    if (normals) t.put('/'), t.integer(std::int64_t(mesh.triangle_normals[f][c]) + 1);
                     t.put(c < 2 ? ' ' : '\n');
                 }
             }
@@ -211,24 +231,30 @@ Chunks stl(const TriangleMesh& mesh) {
 }
 
 Chunks ply(const TriangleMesh& mesh, bool attributes) {
-    const bool uvs = attributes && !mesh.triangle_uvs.empty(), colours = attributes && !mesh.colours.empty();
+    const bool uvs = attributes && !mesh.triangle_uvs.empty(), normals = attributes && !mesh.triangle_normals.empty(),
+               colours = attributes && !mesh.colours.empty(), split_any = uvs || normals;
     SeamSplit split;
-    if (uvs) split = split_at_seams(mesh);
-    const std::size_t nv = uvs ? split.vertex_of.size() : mesh.vertices.size();
+    if (split_any) split = split_at_seams(mesh);
+    const std::size_t nv = split_any ? split.vertex_of.size() : mesh.vertices.size();
     Chunks chunks{"ply\nformat binary_little_endian 1.0\ncomment voxwarp\nelement vertex " + std::to_string(nv) +
                   "\nproperty float x\nproperty float y\nproperty float z\n" + (uvs ? "property float s\nproperty float t\n" : "") +
+                  (normals ? "property float nx\nproperty float ny\nproperty float nz\n" : "") +
                   (colours ? "property uchar red\nproperty uchar green\nproperty uchar blue\n" : "") + "element face " + std::to_string(mesh.face_count()) +
                   "\nproperty list uchar int vertex_indices\nend_header\n"};
-    const std::size_t stride = 12 + (uvs ? 8 : 0) + (colours ? 3 : 0);
+    const std::size_t stride = 12 + (uvs ? 8 : 0) + (normals ? 12 : 0) + (colours ? 3 : 0);
     encode_chunks(nv, chunks, [&](std::size_t b, std::size_t e, std::string& s) {
         s.resize((e - b) * stride);
         char* at = s.data();
         for (std::size_t i = b; i < e; ++i) {
-            const std::size_t v = uvs ? std::size_t(split.vertex_of[i]) : i;
+            const std::size_t v = split_any ? std::size_t(split.vertex_of[i]) : i;
             at = put(put(put(at, float(mesh.vertices[v].x())), float(mesh.vertices[v].y())), float(mesh.vertices[v].z()));
             if (uvs) {
                 const Eigen::Vector2d uv = split.uv_of[i] >= 0 ? mesh.uvs[std::size_t(split.uv_of[i])] : Eigen::Vector2d::Zero();
                 at = put(put(at, float(uv.x())), float(uv.y()));
+            }
+            if (normals) {
+                const Eigen::Vector3d n = split.normal_of[i] >= 0 ? mesh.normals[std::size_t(split.normal_of[i])] : Eigen::Vector3d::Zero();
+                at = put(put(put(at, float(n.x())), float(n.y())), float(n.z()));
             }
             if (colours)
                 for (int a = 0; a < 3; ++a) at = put(at, std::uint8_t(std::lround(std::clamp(mesh.colours[v][a], 0.0f, 1.0f) * 255.0f)));
@@ -244,7 +270,7 @@ Chunks ply(const TriangleMesh& mesh, bool attributes) {
             }
         });
     };
-    faces(uvs ? split.triangles : mesh.triangles, 3);
+    faces(split_any ? split.triangles : mesh.triangles, 3);
     faces(mesh.quads, 4);
     return chunks;
 }

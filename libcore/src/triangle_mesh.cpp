@@ -15,6 +15,7 @@ void check_attributes(const TriangleMesh& mesh, const std::string& source) {
             throw InvalidInput(source + ": " + what + " has " + std::to_string(size) + " entries, expected one per " + per + " (" + std::to_string(expected) + ")");
     };
     sized(mesh.triangle_uvs.size(), nt, "triangle_uvs", "triangle");
+    sized(mesh.triangle_normals.size(), nt, "triangle_normals", "triangle");
     sized(mesh.triangle_materials.size(), nt, "triangle_materials", "triangle");
     sized(mesh.triangle_groups.size(), nt, "triangle_groups", "triangle");
     sized(mesh.colours.size(), mesh.vertices.size(), "colours", "vertex");
@@ -26,6 +27,13 @@ void check_attributes(const TriangleMesh& mesh, const std::string& source) {
             if (i < -1 || i >= std::int64_t(mesh.uvs.size()))
                 throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to texture coordinate " + std::to_string(i) + ", the mesh has " +
                                    std::to_string(mesh.uvs.size()));
+    for (std::size_t i = 0; i < mesh.normals.size(); ++i)
+        if (!mesh.normals[i].allFinite()) throw InvalidInput(source + ": normal " + std::to_string(i) + " is not finite");
+    for (std::size_t t = 0; t < mesh.triangle_normals.size(); ++t)
+        for (const auto i : mesh.triangle_normals[t])
+            if (i < -1 || i >= std::int64_t(mesh.normals.size()))
+                throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to normal " + std::to_string(i) + ", the mesh has " +
+                                   std::to_string(mesh.normals.size()));
     for (std::size_t t = 0; t < mesh.triangle_materials.size(); ++t)
         if (mesh.triangle_materials[t] < -1 || mesh.triangle_materials[t] >= std::int64_t(mesh.materials.size()))
             throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to material " + std::to_string(mesh.triangle_materials[t]) + ", the mesh has " +
@@ -77,12 +85,17 @@ TriangleMesh TriangleMesh::triangulated() const {
         }
     }
     out.uvs = uvs;
+    out.normals = normals;
     out.colours = colours;
     out.materials = materials;
     out.groups = groups;
     if (!triangle_uvs.empty()) {
         out.triangle_uvs = triangle_uvs;
         out.triangle_uvs.resize(out.triangles.size(), {-1, -1, -1});
+    }
+    if (!triangle_normals.empty()) {
+        out.triangle_normals = triangle_normals;
+        out.triangle_normals.resize(out.triangles.size(), {-1, -1, -1});
     }
     if (!triangle_materials.empty()) {
         out.triangle_materials = triangle_materials;

@@ -12,6 +12,8 @@
 
 #include <Eigen/Geometry>
 
+#include <tbb/parallel_for.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -19,6 +21,7 @@
 #include <limits>
 #include <memory>
 #include <tuple>
+#include <unordered_map>
 
 namespace voxwarp {
 
@@ -513,7 +516,7 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
         const auto tt = Clock::now();
         if (!out.quads.empty()) out = out.triangulated(), sources.clear();
         if (sources.empty()) sources = find(out);
-        report.triangles_across_charts = transfer_attributes(out, input_surface(), sources).triangles_across_charts;
+        report.triangles_across_charts = transfer_attributes(out, input_surface(), sources, steps).triangles_across_charts;
         report.attributes = true;
         report.seconds_transfer = seconds_since(tt);
     }
@@ -554,6 +557,33 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     report.sign_note = voxelized.note;
     return deform_voxelized(mesh, std::move(voxmap), script, options, report);
 }
+
+namespace {
+
+/// Vertex mode's normals: each corner's carried through `step` at its vertex (before the vertex moves). Corners of one
+/// vertex that shared a normal share it still; one normal shared by several vertices (a flat face's) becomes one
+/// per vertex, since the map turns it differently at each.
+void push_corner_normals(TriangleMesh& mesh, const std::vector<WarpStep>& step) {
+    if (mesh.triangle_normals.empty()) return;
+    std::unordered_map<std::uint64_t, std::int32_t> index;
+    std::vector<std::pair<std::int32_t, std::int32_t>> pairs; // (vertex, old normal) of each new normal
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c) {
+            std::int32_t& n = mesh.triangle_normals[f][c];
+            if (n < 0) continue;
+            const std::int32_t v = mesh.triangles[f][c];
+            const auto [it, added] = index.try_emplace((std::uint64_t(std::uint32_t(v)) << 32) | std::uint32_t(n), std::int32_t(pairs.size()));
+            if (added) pairs.emplace_back(v, n);
+            n = it->second;
+        }
+    std::vector<Eigen::Vector3d> normals(pairs.size());
+    tbb::parallel_for(std::size_t(0), pairs.size(), [&](std::size_t i) {
+        normals[i] = push_normal(step, mesh.vertices[std::size_t(pairs[i].first)], mesh.normals[std::size_t(pairs[i].second)]);
+    });
+    mesh.normals = std::move(normals);
+}
+
+} // namespace
 
 TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     TriangleMesh out = mesh;
@@ -601,6 +631,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         er.folded_regions = int(folds.size());
         record(er, rest, solution, constraints, owner, 1, frame.voxel_size);
         er.volume_before = enclosed_volume(out);
+        push_corner_normals(out, {{rest, solution.lattice}});
         for (auto& v : out.vertices) v = solution.lattice.evaluate(rest.parameter_of(v));
         er.volume_after = enclosed_volume(out);
         report.edits.push_back(std::move(er));

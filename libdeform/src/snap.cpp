@@ -8,6 +8,8 @@
 #include <voxwarp/errors.h>
 #include <voxwarp/snap.h>
 
+#include <Eigen/LU>
+
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/AABB_triangle_primitive.h>
@@ -310,6 +312,18 @@ using namespace snap_internal;
 Eigen::Vector3d push_forward(const std::vector<WarpStep>& steps, Eigen::Vector3d point) {
     for (const WarpStep& s : steps) point = s.moved.evaluate(rest_parameter(s.rest, point));
     return point;
+}
+
+Eigen::Vector3d push_normal(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Vector3d normal) {
+    for (const WarpStep& s : steps) {
+        const Eigen::Vector3d stu = rest_parameter(s.rest, point);
+        Eigen::Matrix3d moved, rest;
+        point = s.moved.evaluate(stu, moved);
+        s.rest.evaluate(stu, rest);
+        // The step's Jacobian is moved rest^-1, so its inverse transpose is moved^-T rest^T.
+        normal = moved.transpose().partialPivLu().solve(rest.transpose() * normal);
+    }
+    return normal.norm() > 0 && normal.allFinite() ? Eigen::Vector3d(normal.normalized()) : Eigen::Vector3d::Zero();
 }
 
 std::optional<Eigen::Vector3d> pull_back(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Matrix3d* jacobian) {

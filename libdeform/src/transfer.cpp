@@ -8,39 +8,41 @@
 #include <array>
 #include <deque>
 #include <limits>
+#include <type_traits>
 #include <unordered_map>
 
 namespace voxwarp {
 
 namespace {
 
-/// Charts of the input: triangles joined across each edge whose two sides have the same material, the same group
-/// and the same texture coordinates at both ends (or none on both sides).
+/// Charts of the input: triangles joined across each edge whose two sides have the same material, the same group,
+/// and the same texture coordinates and normals at both ends (or none on both sides). A chart's boundary is a UV
+/// seam, a hard edge, or a material or group boundary.
 std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
     const auto& tris = input.triangles;
-    const bool uvs = !input.triangle_uvs.empty();
-    auto uv = [&](std::size_t t, std::size_t c) { return uvs ? input.triangle_uvs[t][c] : -1; };
-    auto same_uv = [&](std::int32_t a, std::int32_t b) { return a == b || (a >= 0 && b >= 0 && input.uvs[std::size_t(a)] == input.uvs[std::size_t(b)]); };
+    auto corner = [](const std::vector<std::array<std::int32_t, 3>>& of_corner, std::size_t t, std::size_t c) { return of_corner.empty() ? -1 : of_corner[t][c]; };
+    auto same_value = [](const auto& values, std::int32_t a, std::int32_t b) { return a == b || (a >= 0 && b >= 0 && values[std::size_t(a)] == values[std::size_t(b)]); };
     auto same = [](const std::vector<std::int32_t>& of_triangle, std::size_t p, std::size_t q) { // a material or group
         return of_triangle.empty() || of_triangle[p] == of_triangle[q];
     };
     internal::DisjointSets sets(tris.size());
-    struct Side { // the first triangle seen on an edge, and its texture coordinates at the edge's lower and higher vertex
+    struct Side { // the first triangle seen on an edge, and its texture coordinates and normals at the edge's lower and higher vertex
         std::size_t triangle;
-        std::int32_t uv_low, uv_high;
+        std::int32_t uv_low, uv_high, normal_low, normal_high;
     };
     std::unordered_map<std::uint64_t, Side> first;
     first.reserve(tris.size() * 2);
     for (std::size_t t = 0; t < tris.size(); ++t)
         for (std::size_t c = 0; c < 3; ++c) {
             const std::size_t d = (c + 1) % 3;
-            std::int32_t a = tris[t][c], b = tris[t][d], ua = uv(t, c), ub = uv(t, d);
-            if (a > b) std::swap(a, b), std::swap(ua, ub);
+            std::int32_t a = tris[t][c], b = tris[t][d], ua = corner(input.triangle_uvs, t, c), ub = corner(input.triangle_uvs, t, d),
+                         na = corner(input.triangle_normals, t, c), nb = corner(input.triangle_normals, t, d);
+            if (a > b) std::swap(a, b), std::swap(ua, ub), std::swap(na, nb);
             const std::uint64_t key = (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
-            const auto [it, added] = first.try_emplace(key, Side{t, ua, ub});
+            const auto [it, added] = first.try_emplace(key, Side{t, ua, ub, na, nb});
             const Side& s = it->second;
-            if (!added && same(input.triangle_materials, s.triangle, t) && same(input.triangle_groups, s.triangle, t) && same_uv(s.uv_low, ua) &&
-                same_uv(s.uv_high, ub))
+            if (!added && same(input.triangle_materials, s.triangle, t) && same(input.triangle_groups, s.triangle, t) && same_value(input.uvs, s.uv_low, ua) &&
+                same_value(input.uvs, s.uv_high, ub) && same_value(input.normals, s.normal_low, na) && same_value(input.normals, s.normal_high, nb))
                 sets.join(t, s.triangle);
         }
     std::vector<std::int32_t> chart(tris.size());
@@ -62,14 +64,15 @@ Eigen::Vector3d barycentric_in_plane(const Eigen::Vector3d& p, const Eigen::Vect
 
 } // namespace
 
-TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& surface, const std::vector<SourcePoint>& sources) {
+TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& surface, const std::vector<SourcePoint>& sources,
+                                   const std::vector<WarpStep>& steps) {
     const TriangleMesh& input = surface.mesh();
     if (!output.quads.empty()) throw InvalidInput("transfer_attributes: the output has quads; triangulate it first");
     if (!input.quads.empty()) throw InvalidInput("transfer_attributes: the input has quads");
     if (sources.size() != output.vertices.size())
         throw InvalidInput("transfer_attributes: " + std::to_string(sources.size()) + " sources for " + std::to_string(output.vertices.size()) + " vertices");
     TransferReport report;
-    output.uvs.clear(), output.triangle_uvs.clear(), output.colours.clear(), output.triangle_materials.clear(), output.triangle_groups.clear();
+    output.uvs.clear(), output.triangle_uvs.clear(), output.normals.clear(), output.triangle_normals.clear(), output.colours.clear(), output.triangle_materials.clear(), output.triangle_groups.clear();
     output.materials = input.materials;
     output.groups = input.groups;
     if (!input.has_attributes()) return report;
@@ -322,43 +325,51 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     };
     by_chart(input.triangle_materials, output.triangle_materials);
     by_chart(input.triangle_groups, output.triangle_groups);
-    if (!input.triangle_uvs.empty()) {
-        output.triangle_uvs.assign(pieces.size(), {-1, -1, -1});
-        // (vertex, chart) -> its texture coordinate's index: corners of one vertex in one chart share it.
-        std::vector<std::pair<std::int32_t, std::int32_t>> first(output.vertices.size(), {-1, -1}); // the first chart seen at a vertex
+    // Per-corner attributes (texture coordinates, normals): one value per (vertex, chart), read in that chart at the
+    // vertex's source point, so that corners of one vertex in one chart share it and a seam's corners differ.
+    auto per_corner = [&](const auto& in_values, const std::vector<std::array<std::int32_t, 3>>& in_index, auto& out_values,
+                          std::vector<std::array<std::int32_t, 3>>& out_index, const auto& finish) {
+        if (in_index.empty()) return;
+        using Value = std::decay_t<decltype(in_values[0])>;
+        out_index.assign(pieces.size(), {-1, -1, -1});
+        std::vector<std::pair<std::int32_t, std::int32_t>> first(output.vertices.size(), {-1, -1}); // the first chart seen at a vertex, its value
         std::unordered_map<std::uint64_t, std::int32_t> more;                                      // (vertex, chart) beyond it: seams
         for (std::size_t f = 0; f < pieces.size(); ++f) {
             const Piece& p = pieces[f];
             if (p.chart < 0) continue;
-            // A face of the piece's chart to continue texture coordinates from, for a corner that does not touch it.
+            // A face of the piece's chart to continue the values from, for a corner that does not touch it.
             std::int32_t face = middle_face[f];
             for (const auto v : p.corners)
                 if (const SourcePoint* s = side_in(v, p.chart); s && face < 0) face = s->face;
-            if (face < 0 || input.triangle_uvs[std::size_t(face)][0] < 0) continue;
+            if (face < 0 || in_index[std::size_t(face)][0] < 0) continue;
             for (std::size_t c = 0; c < 3; ++c) {
                 const std::int32_t v = p.corners[c];
                 auto& known = first[std::size_t(v)];
                 const std::uint64_t key = (std::uint64_t(std::uint32_t(v)) << 32) | std::uint32_t(p.chart);
                 if (known.first == p.chart) {
-                    output.triangle_uvs[f][c] = known.second;
+                    out_index[f][c] = known.second;
                     continue;
                 }
                 if (known.first >= 0)
                     if (const auto it = more.find(key); it != more.end()) {
-                        output.triangle_uvs[f][c] = it->second;
+                        out_index[f][c] = it->second;
                         continue;
                     }
                 const SourcePoint* side = side_in(v, p.chart);
-                const SourcePoint s = side && input.triangle_uvs[std::size_t(side->face)][0] >= 0 ? *side : in_face(point_of(sides[std::size_t(v)][0]), face);
-                Eigen::Vector2d uv = Eigen::Vector2d::Zero();
-                for (std::size_t i = 0; i < 3; ++i) uv += s.barycentric[Eigen::Index(i)] * input.uvs[std::size_t(input.triangle_uvs[std::size_t(s.face)][i])];
-                output.triangle_uvs[f][c] = std::int32_t(output.uvs.size());
-                if (known.first < 0) known = {p.chart, std::int32_t(output.uvs.size())};
-                else more.emplace(key, std::int32_t(output.uvs.size()));
-                output.uvs.push_back(uv);
+                const SourcePoint s = side && in_index[std::size_t(side->face)][0] >= 0 ? *side : in_face(point_of(sides[std::size_t(v)][0]), face);
+                Value value = Value::Zero();
+                for (std::size_t i = 0; i < 3; ++i) value += s.barycentric[Eigen::Index(i)] * in_values[std::size_t(in_index[std::size_t(s.face)][i])];
+                out_index[f][c] = std::int32_t(out_values.size());
+                if (known.first < 0) known = {p.chart, std::int32_t(out_values.size())};
+                else more.emplace(key, std::int32_t(out_values.size()));
+                out_values.push_back(finish(value, s));
             }
         }
-    }
+    };
+    per_corner(input.uvs, input.triangle_uvs, output.uvs, output.triangle_uvs, [](const Eigen::Vector2d& uv, const SourcePoint&) { return uv; });
+    // A normal is interpolated on the input, then carried through the warps as normals go.
+    per_corner(input.normals, input.triangle_normals, output.normals, output.triangle_normals,
+               [&](const Eigen::Vector3d& n, const SourcePoint& s) { return push_normal(steps, point_of(s), n); });
     return report;
 }
 

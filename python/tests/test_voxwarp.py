@@ -339,3 +339,28 @@ def test_obj_groups_come_through_as_arrays(tmp):
     assert A3["groups"] == A2["groups"] and np.array_equal(A3["group"], A2["group"]) and np.array_equal(F3, F2)
     with pytest.raises(voxwarp.InvalidInput, match="\"group\" and \"groups\" go together"):
         voxwarp.write_mesh(tmp / "bad.obj", V2, F2, {"group": A2["group"]})
+
+
+def test_obj_normals_come_through_as_arrays(tmp):
+    # The same tetrahedron flat shaded: each face's corners index its outward normal (OBJ's v//vn).
+    n = np.array([[0, 0, -1], [0, -1, 0], [-1, 0, 0], [1, 1, 1]]) / np.array([1, 1, 1, np.sqrt(3)])[:, None]
+    (tmp / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n" + "".join(f"vn {a} {b} {c}\n" for a, b, c in n) +
+                                  "f 1//1 3//1 2//1\nf 1//2 2//2 4//2\nf 1//3 4//3 3//3\nf 2//4 3//4 4//4\n")
+    V, F, A = voxwarp.read_mesh(tmp / "flat.obj", attributes=True)
+    assert A["normal"].shape == (4, 3) and A["normal_index"].dtype == np.int32 and A["normal_index"].tolist() == [[i] * 3 for i in range(4)]
+    V2, F2, report, A2 = voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0.2, 0.2, 0.2]}]}]}, resolution=32, attributes=A)
+    assert A2["normal_index"].shape == F2.shape
+    # Away from the edges, each output corner carries the normal of the face it lies on.
+    c = V2[F2].mean(axis=1)
+    planes = np.stack([c[:, 2], c[:, 1], c[:, 0], (1 - c.sum(axis=1)) / np.sqrt(3)], axis=1)
+    order = np.sort(np.abs(planes), axis=1)
+    clear = order[:, 1] - order[:, 0] > 2 * report["voxel_size"]
+    nearest = np.argmin(np.abs(planes), axis=1)
+    assert clear.sum() > len(F2) / 2
+    carried = A2["normal"][A2["normal_index"][clear]]
+    assert np.abs(carried - n[nearest[clear]][:, None, :]).max() < 1e-9
+    voxwarp.write_mesh(tmp / "out.obj", V2, F2, A2)
+    _, F3, A3 = voxwarp.read_mesh(tmp / "out.obj", attributes=True)
+    assert np.array_equal(F3, F2) and np.array_equal(A3["normal_index"], A2["normal_index"]) and np.abs(A3["normal"] - A2["normal"]).max() < 1e-12
+    with pytest.raises(voxwarp.InvalidInput, match="\"normal\" and \"normal_index\" go together"):
+        voxwarp.write_mesh(tmp / "bad.obj", V2, F2, {"normal": A2["normal"]})

@@ -23,9 +23,10 @@ Functions
         report: the dict `voxwarp deform --report` writes (residuals, surface misses, volumes, timings).
     deform(..., attributes=A) -> (V, F, report, attributes): the input's attributes in, the output's out.
 
-Attributes (texture coordinates, colours, materials, groups; README.md, "Texture coordinates, colours, materials and
-groups"), a dict with the keys the mesh has: "uv" float64 (k, 2) and "uv_index" int32 (m, 3) (each triangle's
-corners' rows of uv, -1: none), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,) (index into "materials",
+Attributes (texture coordinates, normals, colours, materials, groups; README.md, "Texture coordinates, normals,
+colours, materials and groups"), a dict with the keys the mesh has: "uv" float64 (k, 2) and "uv_index" int32 (m, 3)
+(each triangle's corners' rows of uv, -1: none), "normal" float64 (k, 3) and "normal_index" int32 (m, 3) likewise
+(per-corner normals, carried through a deform as normals turn), "colour" float32 (n, 3) in [0, 1], "material" int32 (m,) (index into "materials",
 -1: none), "materials": [{"name", "diffuse", "texture", "statements"}], "group" int32 (m,) (index into "groups", -1:
 none), "groups": [names] (OBJ's g and o). A missing .mtl or texture is a UserWarning.
 

@@ -1,6 +1,6 @@
 /// @file triangle_mesh.h
 /// @brief A plain indexed polygon mesh (triangles and optional quads) with its attributes (texture coordinates,
-///        vertex colours, materials): voxwarp's currency between libraries.
+///        per-corner normals, vertex colours, materials, groups): voxwarp's currency between libraries.
 ///
 /// Positions are in world units. Faces index into `vertices` (0-based) and are counter-clockwise seen from
 /// outside. The struct makes no manifoldness promise: a mesh read from a scan may be a triangle soup.
@@ -38,13 +38,19 @@ struct TriangleMesh {
 
     std::vector<Eigen::Vector2d> uvs;                      ///< texture coordinates (OBJ's vt), shared by corners that index them
     std::vector<std::array<std::int32_t, 3>> triangle_uvs; ///< #T or empty: each triangle's corners' indices into uvs (-1: none)
+    /// Shading normals (OBJ's vn, glTF's NORMAL), unit length, shared by corners that index them; where a model has
+    /// hard edges, the corners on either side index different normals.
+    std::vector<Eigen::Vector3d> normals;
+    std::vector<std::array<std::int32_t, 3>> triangle_normals; ///< #T or empty: each triangle's corners' indices into normals (-1: none)
     std::vector<Eigen::Vector3f> colours;                  ///< #V or empty: vertex colours, RGB in [0, 1]
     std::vector<std::int32_t> triangle_materials;          ///< #T or empty: each triangle's index into materials (-1: none)
     std::vector<std::string> groups;                       ///< group names (OBJ's g and o statements, the rest of the line)
     std::vector<std::int32_t> triangle_groups;             ///< #T or empty: each triangle's index into groups (-1: none)
     std::vector<Material> materials;
 
-    bool has_attributes() const { return !triangle_uvs.empty() || !colours.empty() || !triangle_materials.empty() || !triangle_groups.empty(); }
+    bool has_attributes() const {
+        return !triangle_uvs.empty() || !triangle_normals.empty() || !colours.empty() || !triangle_materials.empty() || !triangle_groups.empty();
+    }
 
     std::size_t face_count() const { return triangles.size() + quads.size(); }
     /// The same surface with every quad split into two triangles (along its shorter diagonal).
@@ -87,7 +93,7 @@ MeshTopology topology(const TriangleMesh& mesh);
 /// @throw InvalidInput whose message starts with `source` and says what is wrong (e.g. "F: face 12 refers to vertex
 ///        4001, the mesh has 1839 vertices").
 void check_mesh(const TriangleMesh& mesh, const std::string& source);
-/// The attribute part of check_mesh: array sizes, indices within uvs and materials, finite values.
+/// The attribute part of check_mesh: array sizes, indices within uvs, normals, materials and groups, finite values.
 void check_attributes(const TriangleMesh& mesh, const std::string& source);
 
 /// Signed volume enclosed by a closed, outward-oriented mesh (divergence theorem), world units cubed.

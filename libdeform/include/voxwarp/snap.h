@@ -25,6 +25,10 @@ struct WarpStep {
 /// The exact image of an input-frame point through every step, in order.
 Eigen::Vector3d push_forward(const std::vector<WarpStep>& steps, Eigen::Vector3d point);
 
+/// A surface normal at an input-frame point, carried through every step as a normal goes (the inverse transpose of
+/// the map's Jacobian there), unit length; a zero normal stays zero.
+Eigen::Vector3d push_normal(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Vector3d normal);
+
 /// The input-frame point whose image is `point` (Newton's method per step, last step first), and the Jacobian of
 /// the whole map there (d output / d input). Empty where Newton does not converge (the map folds or the point lies
 /// beyond the lattice's reach).
