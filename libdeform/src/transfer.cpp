@@ -334,6 +334,7 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
         out_index.assign(pieces.size(), {-1, -1, -1});
         std::vector<std::pair<std::int32_t, std::int32_t>> first(output.vertices.size(), {-1, -1}); // the first chart seen at a vertex, its value
         std::unordered_map<std::uint64_t, std::int32_t> more;                                      // (vertex, chart) beyond it: seams
+        std::vector<SourcePoint> read_at;                                                          // where each value is read
         for (std::size_t f = 0; f < pieces.size(); ++f) {
             const Piece& p = pieces[f];
             if (p.chart < 0) continue;
@@ -356,15 +357,19 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
                         continue;
                     }
                 const SourcePoint* side = side_in(v, p.chart);
-                const SourcePoint s = side && in_index[std::size_t(side->face)][0] >= 0 ? *side : in_face(point_of(sides[std::size_t(v)][0]), face);
-                Value value = Value::Zero();
-                for (std::size_t i = 0; i < 3; ++i) value += s.barycentric[Eigen::Index(i)] * in_values[std::size_t(in_index[std::size_t(s.face)][i])];
-                out_index[f][c] = std::int32_t(out_values.size());
-                if (known.first < 0) known = {p.chart, std::int32_t(out_values.size())};
-                else more.emplace(key, std::int32_t(out_values.size()));
-                out_values.push_back(finish(value, s));
+                out_index[f][c] = std::int32_t(read_at.size());
+                if (known.first < 0) known = {p.chart, std::int32_t(read_at.size())};
+                else more.emplace(key, std::int32_t(read_at.size()));
+                read_at.push_back(side && in_index[std::size_t(side->face)][0] >= 0 ? *side : in_face(point_of(sides[std::size_t(v)][0]), face));
             }
         }
+        out_values.resize(read_at.size());
+        tbb::parallel_for(std::size_t(0), read_at.size(), [&](std::size_t i) { // a normal's push through the warps is the costly part
+            const SourcePoint& s = read_at[i];
+            Value value = Value::Zero();
+            for (std::size_t k = 0; k < 3; ++k) value += s.barycentric[Eigen::Index(k)] * in_values[std::size_t(in_index[std::size_t(s.face)][k])];
+            out_values[i] = finish(value, s);
+        });
     };
     per_corner(input.uvs, input.triangle_uvs, output.uvs, output.triangle_uvs, [](const Eigen::Vector2d& uv, const SourcePoint&) { return uv; });
     // A normal is interpolated on the input, then carried through the warps as normals go.
