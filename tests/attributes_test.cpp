@@ -450,6 +450,30 @@ TEST(Attributes, NormalsAreReadWrittenAndKeepHardEdgesThroughARemesh) {
     EXPECT_GT(checked, out.triangles.size());
     EXPECT_EQ(wrong, 0u);
     EXPECT_EQ(unlike, 0u);
+
+    // A flat-shaded sphere (each face its own normal, its neighbours' a few degrees off): its edges are not hard
+    // (under 30 degrees), so nothing is cut, and each corner takes the normal of the face it comes from.
+    TriangleMesh faceted = test::sphere_mesh(Eigen::Vector3d::Zero(), 1.0, 3);
+    double widest = 0; // the largest angle between a face's normal and the radius through a point of it
+    for (const auto& t : faceted.triangles) {
+        const Eigen::Vector3d n = (faceted.vertices[std::size_t(t[1])] - faceted.vertices[std::size_t(t[0])])
+                                      .cross(faceted.vertices[std::size_t(t[2])] - faceted.vertices[std::size_t(t[0])]).normalized();
+        for (const auto v : t) widest = std::max(widest, std::acos(std::clamp(n.dot(faceted.vertices[std::size_t(v)].normalized()), -1.0, 1.0)));
+        faceted.triangle_normals.push_back({std::int32_t(faceted.normals.size()), std::int32_t(faceted.normals.size()), std::int32_t(faceted.normals.size())});
+        faceted.normals.push_back(n);
+    }
+    DeformReport sphere_report;
+    const TriangleMesh round = deform_mesh(faceted, EditScript{}, options, sphere_report);
+    EXPECT_EQ(sphere_report.triangles_across_charts, 0u);
+    EXPECT_EQ(round.triangles.size(), sphere_report.output_faces);
+    ASSERT_EQ(round.triangle_normals.size(), round.triangles.size());
+    double off = 0; // the output corners' normals against the radius through them
+    for (std::size_t f = 0; f < round.triangles.size(); ++f)
+        for (std::size_t c = 0; c < 3; ++c)
+            off = std::max(off, std::acos(std::clamp(round.normals[std::size_t(round.triangle_normals[f][c])].dot(round.vertices[std::size_t(round.triangles[f][c])].normalized()), -1.0, 1.0)));
+    std::printf("flat-shaded sphere remeshed at 32: %zu triangles, none cut; corner normals at most %.2f degrees from the radius (faces: %.2f)\n",
+                round.triangles.size(), off * 180 / M_PI, widest * 180 / M_PI);
+    EXPECT_LE(off, widest + 0.02);
 }
 
 TEST(Attributes, NormalsTurnWithTheWarp) {

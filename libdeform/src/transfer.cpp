@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <deque>
 #include <limits>
 #include <type_traits>
@@ -15,13 +16,22 @@ namespace voxwarp {
 
 namespace {
 
+/// Normals on the two sides of an edge closer than this angle do not make it a hard edge: Blender's auto-smooth
+/// default. A flat-shaded fine mesh (every face its own normal, a few degrees from its neighbours') is shaded smooth
+/// rather than cut along every input edge; a box's edges, and a coarse model's creases, stay hard.
+constexpr double kHardEdgeDegrees = 30;
+
 /// Charts of the input: triangles joined across each edge whose two sides have the same material, the same group,
-/// and the same texture coordinates and normals at both ends (or none on both sides). A chart's boundary is a UV
-/// seam, a hard edge, or a material or group boundary.
+/// the same texture coordinates at both ends, and normals within kHardEdgeDegrees at both ends (or none on both
+/// sides). A chart's boundary is a UV seam, a hard edge, or a material or group boundary.
 std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
     const auto& tris = input.triangles;
     auto corner = [](const std::vector<std::array<std::int32_t, 3>>& of_corner, std::size_t t, std::size_t c) { return of_corner.empty() ? -1 : of_corner[t][c]; };
     auto same_value = [](const auto& values, std::int32_t a, std::int32_t b) { return a == b || (a >= 0 && b >= 0 && values[std::size_t(a)] == values[std::size_t(b)]); };
+    const double smooth = std::cos(kHardEdgeDegrees * M_PI / 180);
+    auto smooth_normal = [&](std::int32_t a, std::int32_t b) {
+        return a == b || (a >= 0 && b >= 0 && input.normals[std::size_t(a)].dot(input.normals[std::size_t(b)]) >= smooth);
+    };
     auto same = [](const std::vector<std::int32_t>& of_triangle, std::size_t p, std::size_t q) { // a material or group
         return of_triangle.empty() || of_triangle[p] == of_triangle[q];
     };
@@ -42,7 +52,7 @@ std::vector<std::int32_t> charts_of(const TriangleMesh& input) {
             const auto [it, added] = first.try_emplace(key, Side{t, ua, ub, na, nb});
             const Side& s = it->second;
             if (!added && same(input.triangle_materials, s.triangle, t) && same(input.triangle_groups, s.triangle, t) && same_value(input.uvs, s.uv_low, ua) &&
-                same_value(input.uvs, s.uv_high, ub) && same_value(input.normals, s.normal_low, na) && same_value(input.normals, s.normal_high, nb))
+                same_value(input.uvs, s.uv_high, ub) && smooth_normal(s.normal_low, na) && smooth_normal(s.normal_high, nb))
                 sets.join(t, s.triangle);
         }
     std::vector<std::int32_t> chart(tris.size());
