@@ -275,6 +275,42 @@ def check_attributes(out):
     return figures
 
 
+def check_normals(out):
+    """A cube with custom split normals that its geometry does not give (each corner's normal points from the centre
+    to its vertex: a rounded look on flat sides, common in games), a pin at its centre (nothing moves): Apply's object
+    has custom normals, each loop's the source's interpolated at the nearest source point."""
+    empty_scene()
+    bpy.ops.mesh.primitive_cube_add(size=2)
+    cube = bpy.context.active_object
+    me = cube.data
+    if hasattr(me, "use_auto_smooth"):
+        me.use_auto_smooth = True
+    me.normals_split_custom_set([me.vertices[l.vertex_index].co.normalized()[:] for l in me.loops])
+    cube.voxwarp.resolution = 32
+    add(cube, "PIN", (0, 0, 0))
+    select(cube)
+    assert bpy.ops.voxwarp.deform() == {"FINISHED"}
+    result = bpy.context.view_layer.objects.active
+    out_me = result.data
+    figures = {"source_custom": me.has_custom_normals, "custom": out_me.has_custom_normals, "triangles": len(out_me.polygons)}
+    me.calc_loop_triangles()
+    me.calc_normals_split()
+    out_me.calc_normals_split()
+    tree = BVHTree.FromPolygons([v.co[:] for v in me.vertices], [t.vertices[:] for t in me.loop_triangles])
+    from mathutils.interpolate import poly_3d_calc
+    degrees = []
+    for poly in list(out_me.polygons)[::3]:
+        for loop in poly.loop_indices:
+            p = out_me.vertices[out_me.loops[loop].vertex_index].co
+            q, _, t, _ = tree.find_nearest(p)
+            tri = me.loop_triangles[t]
+            w = poly_3d_calc([me.vertices[i].co for i in tri.vertices], q)
+            n = sum((Vector(me.loops[l].normal) * wi for l, wi in zip(tri.loops, w)), Vector((0, 0, 0))).normalized()
+            degrees.append(math.degrees(Vector(out_me.loops[loop].normal).angle(n, 0.0)))
+    figures["degrees"] = {"median": float(np.median(degrees)), "p99": float(np.percentile(degrees, 99)), "max": float(np.max(degrees)), "loops": len(degrees)}
+    return figures
+
+
 def check_handles(out):
     """Handles as the operators place them: at the selected vertices in Edit Mode, at the 3D cursor of a moved and
     scaled mesh (its own frame), and a handle shown as a sphere working as a region."""
@@ -476,7 +512,7 @@ def check_undo(out):
     yield figures
 
 
-CHECKS = {"attributes": check_attributes, "bend": check_bend, "handles": check_handles, "panel": check_panel, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
+CHECKS = {"attributes": check_attributes, "normals": check_normals, "bend": check_bend, "handles": check_handles, "panel": check_panel, "files": check_files, "errors": check_errors, "live": check_live, "undo": check_undo}
 
 
 def main():

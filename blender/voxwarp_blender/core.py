@@ -104,8 +104,8 @@ def _preload(folder):
 
 def source_arrays(obj, depsgraph=None, modifiers=True):
     """The mesh object's evaluated mesh (modifiers applied; modifiers=False: its own mesh) as voxwarp's arrays in its
-    local frame: V float64 (n, 3), F int32 (m, 3), and its attributes (UV map, colour, materials) as
-    voxwarp.read_mesh gives them, or None."""
+    local frame: V float64 (n, 3), F int32 (m, 3), and its attributes (UV map, custom split normals, colour,
+    materials) as voxwarp.read_mesh gives them, or None."""
     if modifiers:
         evaluated = obj.evaluated_get(depsgraph or bpy.context.evaluated_depsgraph_get())
         me = evaluated.to_mesh()
@@ -130,6 +130,16 @@ def source_arrays(obj, depsgraph=None, modifiers=True):
             unique, index = np.unique(corners, axis=0, return_inverse=True)
             attributes["uv"] = unique
             attributes["uv_index"] = index.reshape(-1, 3).astype(np.int32)
+        if getattr(me, "has_custom_normals", False):
+            # Shading the user set (hard edges, weighted or baked normals) is carried; a mesh without custom normals
+            # gets the output's own shading instead.
+            me.calc_normals_split()
+            normal = np.empty(3 * len(me.loops), np.float32)
+            me.loops.foreach_get("normal", normal)
+            corners = normal.reshape(-1, 3)[loops].astype(np.float64)
+            unique, index = np.unique(corners, axis=0, return_inverse=True)
+            attributes["normal"] = unique
+            attributes["normal_index"] = index.reshape(-1, 3).astype(np.int32)
         colour = _active_colour(me)
         if colour is not None:
             attributes["colour"] = colour
@@ -406,7 +416,7 @@ def options_of(settings, resolution=None):
 
 def fill_mesh(me, V, F, attributes=None):
     """Replace the Blender mesh's geometry by voxwarp's arrays (smooth shaded but for edges over 30 degrees), with
-    UV map, colour and material indices from `attributes`."""
+    UV map, custom split normals, colour and material indices from `attributes`."""
     me.clear_geometry()
     n, m = len(V), len(F)
     me.vertices.add(n)
@@ -435,6 +445,13 @@ def fill_mesh(me, V, F, attributes=None):
             field = "color_srgb" if hasattr(layer.data[0], "color_srgb") else "color"
             layer.data.foreach_set(field, rgba.ravel())
     me.update(calc_edges=True)
+    if attributes and "normal_index" in attributes and len(attributes["normal"]):
+        index = np.asarray(attributes["normal_index"]).ravel()
+        normals = np.asarray(attributes["normal"], np.float32)[np.maximum(index, 0)]
+        normals[index < 0] = 0  # a zero custom normal: Blender's own there
+        if hasattr(me, "use_auto_smooth"):  # custom normals need it before Blender 4.1
+            me.use_auto_smooth = True
+        me.normals_split_custom_set(normals)
 
 
 def result_object(obj, name):

@@ -175,6 +175,15 @@ def test_apply_keeps_the_material_uv_map_and_colour(tmp):
     assert f["colour"]["median"] <= 0.001 and f["colour"]["p99"] <= 0.005, f["colour"]
 
 
+def test_apply_keeps_custom_split_normals(tmp):
+    f = check("normals", tmp)
+    print(f"cube with rounded custom normals through Apply at 32: loop normals to the source's {f['degrees']} degrees")
+    assert f["source_custom"] and f["custom"], f
+    # Measured: median and p99 0, max 0.13 degree (Blender stores custom normals in 16-bit pairs). Blender's own
+    # normals there (flat sides) lie up to 55 degrees off.
+    assert f["degrees"]["median"] <= 0.01 and f["degrees"]["max"] <= 0.3, f["degrees"]
+
+
 def test_handles_go_where_the_operators_put_them(tmp):
     f = check("handles", tmp)
     assert f["at_vertices"] == [2.0, 0.0, -0.5]  # the mean of the two selected vertices, in the mesh's own frame
