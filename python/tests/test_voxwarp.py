@@ -318,6 +318,18 @@ def test_attributes_come_through_deform_and_files_as_arrays(tmp):
     assert A5["materials"][0]["name"] == "skin"
 
 
+def tetrahedron_faces(V, F, h):
+    """For each triangle of a remeshed corner tetrahedron (faces in the planes z = 0, y = 0, x = 0 and
+    x + y + z = 1, in the order of the test files' faces): whether its centroid lies clear of the edges (two voxels
+    nearer one face's plane than any other's), and the face it is nearest."""
+    c = V[F].mean(axis=1)
+    planes = np.abs(np.stack([c[:, 2], c[:, 1], c[:, 0], (1 - c.sum(axis=1)) / np.sqrt(3)], axis=1))
+    order = np.sort(planes, axis=1)
+    clear = order[:, 1] - order[:, 0] > 2 * h
+    assert clear.sum() > len(F) / 2
+    return clear, np.argmin(planes, axis=1)
+
+
 def test_obj_groups_come_through_as_arrays(tmp):
     # A tetrahedron whose faces are in two groups (one named by "o") and one in none: read, remeshed (a pin alone: the round trip) and written.
     (tmp / "groups.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\ng base\nf 1 3 2\no side wall\nf 1 2 4\nf 1 4 3\ng\nf 2 3 4\n")
@@ -325,14 +337,8 @@ def test_obj_groups_come_through_as_arrays(tmp):
     assert A["groups"] == ["base", "side wall"] and A["group"].dtype == np.int32 and A["group"].tolist() == [0, 1, 1, -1]
     V2, F2, report, A2 = voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0.2, 0.2, 0.2]}]}]}, resolution=32, attributes=A)
     assert A2["groups"] == A["groups"] and A2["group"].shape == (len(F2),)
-    # Each output triangle in the group of the input face its centroid is nearest (the faces' planes: z = 0, y = 0,
-    # x = 0 and x + y + z = 1), away from the tetrahedron's edges.
-    c = V2[F2].mean(axis=1)
-    planes = np.stack([c[:, 2], c[:, 1], c[:, 0], (1 - c.sum(axis=1)) / np.sqrt(3)], axis=1)
-    order = np.sort(np.abs(planes), axis=1)
-    clear = order[:, 1] - order[:, 0] > 2 * report["voxel_size"]
-    nearest = np.argmin(np.abs(planes), axis=1)
-    assert clear.sum() > len(F2) / 2
+    # Each output triangle in the group of the input face its centroid is nearest, away from the tetrahedron's edges.
+    clear, nearest = tetrahedron_faces(V2, F2, report["voxel_size"])
     assert (A2["group"][clear] == np.array([0, 1, 1, -1])[nearest[clear]]).all()
     voxwarp.write_mesh(tmp / "out.obj", V2, F2, A2)
     _, F3, A3 = voxwarp.read_mesh(tmp / "out.obj", attributes=True)
@@ -351,12 +357,7 @@ def test_obj_normals_come_through_as_arrays(tmp):
     V2, F2, report, A2 = voxwarp.deform(V, F, {"edits": [{"constraints": [{"pin": [0.2, 0.2, 0.2]}]}]}, resolution=32, attributes=A)
     assert A2["normal_index"].shape == F2.shape
     # Away from the edges, each output corner carries the normal of the face it lies on.
-    c = V2[F2].mean(axis=1)
-    planes = np.stack([c[:, 2], c[:, 1], c[:, 0], (1 - c.sum(axis=1)) / np.sqrt(3)], axis=1)
-    order = np.sort(np.abs(planes), axis=1)
-    clear = order[:, 1] - order[:, 0] > 2 * report["voxel_size"]
-    nearest = np.argmin(np.abs(planes), axis=1)
-    assert clear.sum() > len(F2) / 2
+    clear, nearest = tetrahedron_faces(V2, F2, report["voxel_size"])
     carried = A2["normal"][A2["normal_index"][clear]]
     assert np.abs(carried - n[nearest[clear]][:, None, :]).max() < 1e-9
     voxwarp.write_mesh(tmp / "out.obj", V2, F2, A2)
