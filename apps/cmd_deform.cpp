@@ -145,7 +145,7 @@ void add_deform(CLI::App& app, Global& global, Action& action) {
 
 void add_remesh(CLI::App& app, Global& global, Action& action) {
     auto a = std::make_shared<DeformArgs>();
-    auto* cmd = app.add_subcommand("remesh", "Mesh in, re-polygonized mesh out (the round trip, no edit): voxelize, extract, snap onto the input; texture coordinates, colours and materials carried");
+    auto* cmd = app.add_subcommand("remesh", "Mesh in, re-polygonized mesh out (the round trip, no edit): voxelize, extract, snap onto the input; texture coordinates, normals, colours, materials and groups carried");
     cmd->add_option("input", a->input, "Input mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("-o,--output", a->output, "Output mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("--report", a->report, "Write a JSON report: volumes, timings, peak memory, snapped vertices");
