@@ -383,17 +383,22 @@ TEST(Attributes, NormalsAreReadWrittenAndKeepHardEdgesThroughARemesh) {
     const fs::path dir = scratch("normals");
     const TriangleMesh cube = hard_edged_cube();
     // OBJ as v//vn, and with texture coordinates as v/vt/vn; glTF, whose vertices split at the hard edges and weld
-    // again on reading. Each corner comes back with its side's normal.
+    // again on reading; PLY, whose vertices split there too (and stay split). Each corner comes back with its side's
+    // normal.
     TriangleMesh textured = cube;
     textured.uvs = {Eigen::Vector2d(0.25, 0.5)};
     textured.triangle_uvs.assign(cube.triangles.size(), {0, 0, 0});
-    for (const auto& [mesh, name] : {std::pair{&cube, "cube.obj"}, std::pair{static_cast<const TriangleMesh*>(&textured), "textured.obj"}, std::pair{&cube, "cube.glb"}}) {
+    for (const auto& [mesh, name] : {std::pair{&cube, "cube.obj"}, std::pair{static_cast<const TriangleMesh*>(&textured), "textured.obj"}, std::pair{&cube, "cube.glb"}, std::pair{&cube, "cube.ply"}}) {
         SCOPED_TRACE(name);
         write_mesh(*mesh, (dir / name).string());
         const TriangleMesh back = read_mesh((dir / name).string());
-        ASSERT_EQ(back.vertices.size(), cube.vertices.size());
         ASSERT_EQ(back.triangle_normals.size(), cube.triangles.size());
-        EXPECT_TRUE(topology(back).watertight());
+        if (std::string(name) == "cube.ply") {
+            EXPECT_GT(back.vertices.size(), cube.vertices.size()); // a corner on a hard edge is one vertex per side
+        } else {
+            ASSERT_EQ(back.vertices.size(), cube.vertices.size());
+            EXPECT_TRUE(topology(back).watertight());
+        }
         for (std::size_t f = 0; f < back.triangles.size(); ++f)
             for (std::size_t c = 0; c < 3; ++c) {
                 const auto& t = back.triangles[f];

@@ -70,8 +70,14 @@ public:
         if (vh.is_valid() && vh.idx() < int(mesh.vertices.size())) mesh.vertices[vh.idx()] = Eigen::Vector3d(p[0], p[1], p[2]);
     }
     void set_halfedge(VertexHandle, HalfedgeHandle) override {}
-    void set_normal(VertexHandle, const Vec3f&) override {}
-    void set_normal(VertexHandle, const Vec3d&) override {}
+    void set_normal(VertexHandle vh, const Vec3f& n) override { set_normal(vh, Vec3d(n[0], n[1], n[2])); }
+    /// Per-vertex normals (PLY's nx ny nz): the vertex's own index into normals.
+    void set_normal(VertexHandle vh, const Vec3d& n) override {
+        if (!vh.is_valid() || vh.idx() >= int(mesh.vertices.size())) return;
+        mesh.normals.resize(mesh.vertices.size(), Eigen::Vector3d::Zero());
+        const Eigen::Vector3d v(n[0], n[1], n[2]);
+        mesh.normals[std::size_t(vh.idx())] = v.norm() > 0 ? Eigen::Vector3d(v.normalized()) : v;
+    }
     void set_color(VertexHandle vh, const Vec3uc& c) override { set_color(vh, Vec3f(c[0], c[1], c[2]) / 255.0f); }
     void set_color(VertexHandle vh, const Vec4uc& c) override { set_color(vh, Vec3f(c[0], c[1], c[2]) / 255.0f); }
     void set_color(VertexHandle vh, const Vec4f& c) override { set_color(vh, Vec3f(c[0], c[1], c[2])); }
@@ -169,7 +175,7 @@ TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnin
     validate_before_openmesh(path, lower_extension(path), file_size);
 
     SoupImporter importer;
-    IO::Options options(IO::Options::VertexColor | IO::Options::VertexTexCoord);
+    IO::Options options(IO::Options::VertexColor | IO::Options::VertexTexCoord | IO::Options::VertexNormal);
     if (lower_extension(path) == ".om") {
         // The OM reader rebuilds halfedge connectivity, so it needs a real halfedge mesh behind it.
         OutputMesh om;
@@ -193,6 +199,12 @@ TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnin
         mesh.uvs.resize(mesh.vertices.size(), Eigen::Vector2d::Zero());
         mesh.triangle_uvs = mesh.triangles;
     }
+    if (!mesh.normals.empty()) {
+        mesh.normals.resize(mesh.vertices.size(), Eigen::Vector3d::Zero());
+        mesh.triangle_normals = mesh.triangles;
+    }
+    for (std::size_t i = 0; i < mesh.normals.size(); ++i)
+        if (!mesh.normals[i].allFinite()) throw InvalidInput(path + ": vertex " + std::to_string(i + 1) + " has a non-finite normal");
     for (std::size_t i = 0; i < mesh.uvs.size(); ++i)
         if (!mesh.uvs[i].allFinite()) throw InvalidInput(path + ": vertex " + std::to_string(i + 1) + " has a non-finite texture coordinate");
     return std::move(mesh);
