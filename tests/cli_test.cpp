@@ -23,7 +23,7 @@ namespace fs = std::filesystem;
 
 struct Outcome {
     int code = -1;
-    std::string err;
+    std::string err, out;
 };
 
 class Cli : public ::testing::Test {
@@ -40,12 +40,15 @@ protected:
         return file(name);
     }
     Outcome run(const std::string& args) const {
-        const std::string err = file("stderr.txt");
-        const int status = std::system((std::string(VOXWARP_CLI) + " " + args + " > /dev/null 2> " + err).c_str());
-        std::ifstream in(err);
-        std::stringstream text;
-        text << in.rdbuf();
-        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+        const std::string err = file("stderr.txt"), out = file("stdout.txt");
+        const int status = std::system((std::string(VOXWARP_CLI) + " " + args + " > " + out + " 2> " + err).c_str());
+        auto text_of = [](const std::string& path) {
+            std::ifstream in(path);
+            std::stringstream text;
+            text << in.rdbuf();
+            return text.str();
+        };
+        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text_of(err), text_of(out)};
     }
     static int lines(const std::string& s) { return int(std::count(s.begin(), s.end(), '\n')); }
 };
@@ -218,6 +221,11 @@ TEST_F(Cli, RemeshCarriesTheTextureAndItsLibrary) {
     std::stringstream json;
     json << report.rdbuf();
     EXPECT_NE(json.str().find("\"attributes\": true"), std::string::npos) << json.str();
+    // `info` names what the input carries (Spot: 3225 texture coordinates, no normals) and what a plain mesh does not.
+    const Outcome info = run("info " + file("in/spot_triangulated.obj"));
+    ASSERT_EQ(info.code, 0) << info.err;
+    EXPECT_NE(info.out.find("attributes: 3225 texture coordinates, 1 material\n"), std::string::npos) << info.out;
+    EXPECT_NE(run("info " + test::data_path("bunny.obj")).out.find("attributes: none\n"), std::string::npos);
 
     // An output named like the input's library never overwrites it: its own library takes another name.
     std::ifstream before(dir / "in" / "spot.mtl");
