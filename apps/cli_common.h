@@ -28,6 +28,10 @@ ProgressCallback stderr_progress(const Global& global);
 /// Print an informational line to stderr unless quiet.
 void note(const Global& global, const std::string& line);
 
+/// The attributes a mesh carries, as a comma-separated list ("texture coordinates, normals, vertex colours,
+/// materials, groups"; with `counts`, each with its number: "3225 texture coordinates, 1 material"); empty: none.
+std::string attributes_of(const TriangleMesh& mesh, bool counts);
+
 /// Run `f`; an InvalidInput it throws that does not already start with `source` is rethrown prefixed with it,
 /// so every message about bad input names the file it came from.
 template <class F>

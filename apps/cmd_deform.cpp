@@ -103,13 +103,9 @@ void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script,
     write_mesh(out, a.output);
     report.seconds_write = seconds_since(t);
     finish(global, a, report, start);
-    std::string carried;
-    for (const auto& [has, what] : {std::pair{!out.triangle_uvs.empty(), "texture coordinates"}, std::pair{!out.triangle_normals.empty(), "normals"},
-                                    std::pair{!out.colours.empty(), "colours"},
-                                    std::pair{!out.materials.empty(), "materials"}, std::pair{!out.triangle_groups.empty(), "groups"}})
-        if (has) carried += (carried.empty() ? " (with its " : ", ") + std::string(what);
+    const std::string carried = attributes_of(out, false);
     note(global, "wrote " + a.output + ": " + std::to_string(out.vertices.size()) + " vertices, " + std::to_string(out.face_count()) + " faces" +
-                     (carried.empty() ? "" : carried + ")"));
+                     (carried.empty() ? "" : " (with its " + carried + ")"));
     if (!a.png.empty()) {
         render_png({mesh, out}, {"before", "after"}, {}, a.png);
         note(global, "wrote " + a.png);

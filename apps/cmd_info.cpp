@@ -28,15 +28,7 @@ void print_mesh_info(const std::string& path) {
                 (long long)t.euler);
     if (t.watertight()) std::printf("enclosed volume: %.9g\n", enclosed_volume(mesh));
     // What a remesh or deform will carry: a file whose texture coordinates or normals were not recognised shows here.
-    std::string carried;
-    auto add = [&](bool has, const std::string& what) {
-        if (has) carried += (carried.empty() ? "" : ", ") + what;
-    };
-    add(!mesh.triangle_uvs.empty(), std::to_string(mesh.uvs.size()) + " texture coordinates");
-    add(!mesh.triangle_normals.empty(), std::to_string(mesh.normals.size()) + " normals");
-    add(!mesh.colours.empty(), "vertex colours");
-    add(!mesh.materials.empty(), std::to_string(mesh.materials.size()) + (mesh.materials.size() == 1 ? " material" : " materials"));
-    add(!mesh.triangle_groups.empty(), std::to_string(mesh.groups.size()) + (mesh.groups.size() == 1 ? " group" : " groups"));
+    const std::string carried = attributes_of(mesh, true);
     std::printf("attributes: %s\n", carried.empty() ? "none" : carried.c_str());
 }
 

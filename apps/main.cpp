@@ -40,6 +40,19 @@ void note(const Global& global, const std::string& line) {
     if (!global.quiet) std::fprintf(stderr, "voxwarp: %s\n", line.c_str());
 }
 
+std::string attributes_of(const TriangleMesh& mesh, bool counts) {
+    std::string list;
+    auto add = [&](bool has, std::size_t count, const char* one, const char* many) {
+        if (has) list += (list.empty() ? "" : ", ") + (counts ? std::to_string(count) + " " + (count == 1 ? one : many) : std::string(many));
+    };
+    add(!mesh.triangle_uvs.empty(), mesh.uvs.size(), "texture coordinate", "texture coordinates");
+    add(!mesh.triangle_normals.empty(), mesh.normals.size(), "normal", "normals");
+    if (!mesh.colours.empty()) list += (list.empty() ? "" : ", ") + std::string("vertex colours");
+    add(!mesh.materials.empty(), mesh.materials.size(), "material", "materials");
+    add(!mesh.triangle_groups.empty(), mesh.groups.size(), "group", "groups");
+    return list;
+}
+
 } // namespace voxwarp::cli
 
 int main(int argc, char** argv) {

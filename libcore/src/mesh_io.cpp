@@ -203,10 +203,9 @@ TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnin
         mesh.normals.resize(mesh.vertices.size(), Eigen::Vector3d::Zero());
         mesh.triangle_normals = mesh.triangles;
     }
-    for (std::size_t i = 0; i < mesh.normals.size(); ++i)
-        if (!mesh.normals[i].allFinite()) throw InvalidInput(path + ": vertex " + std::to_string(i + 1) + " has a non-finite normal");
     for (std::size_t i = 0; i < mesh.uvs.size(); ++i)
         if (!mesh.uvs[i].allFinite()) throw InvalidInput(path + ": vertex " + std::to_string(i + 1) + " has a non-finite texture coordinate");
+    check_attributes(mesh, path); // the normals
     return std::move(mesh);
 }
 

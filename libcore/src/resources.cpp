@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace voxwarp {
@@ -35,14 +36,15 @@ std::string format_bytes(std::uint64_t bytes) {
     return buffer;
 }
 
+std::uint64_t memory_limit(std::uint64_t limit_bytes) {
+    if (limit_bytes != 0) return limit_bytes;
+    const std::uint64_t available = available_memory_bytes();
+    return available == 0 ? std::numeric_limits<std::uint64_t>::max() : available / 10 * 9;
+}
+
 void require_memory(std::uint64_t bytes, std::uint64_t limit_bytes, const std::string& what) {
-    std::uint64_t limit = limit_bytes;
-    const char* source = "--max-memory";
-    if (limit == 0) {
-        limit = available_memory_bytes() / 10 * 9;
-        source = "90% of available memory";
-        if (limit == 0) return; // unknown: nothing to check against
-    }
+    const std::uint64_t limit = memory_limit(limit_bytes);
+    const char* source = limit_bytes != 0 ? "--max-memory" : "90% of available memory";
     if (bytes > limit)
         throw ResourceLimit(what + " needs about " + format_bytes(bytes) + ", more than the limit of " + format_bytes(limit) +
                             " (" + source + "); lower the resolution or raise --max-memory");

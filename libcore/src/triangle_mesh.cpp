@@ -20,20 +20,18 @@ void check_attributes(const TriangleMesh& mesh, const std::string& source) {
     sized(mesh.triangle_groups.size(), nt, "triangle_groups", "triangle");
     sized(mesh.colours.size(), mesh.vertices.size(), "colours", "vertex");
     if (mesh.has_attributes() && !mesh.quads.empty()) throw InvalidInput(source + ": a mesh with quads carries no attributes; triangulate it first");
-    for (std::size_t i = 0; i < mesh.uvs.size(); ++i)
-        if (!mesh.uvs[i].allFinite()) throw InvalidInput(source + ": texture coordinate " + std::to_string(i) + " is not finite");
-    for (std::size_t t = 0; t < mesh.triangle_uvs.size(); ++t)
-        for (const auto i : mesh.triangle_uvs[t])
-            if (i < -1 || i >= std::int64_t(mesh.uvs.size()))
-                throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to texture coordinate " + std::to_string(i) + ", the mesh has " +
-                                   std::to_string(mesh.uvs.size()));
-    for (std::size_t i = 0; i < mesh.normals.size(); ++i)
-        if (!mesh.normals[i].allFinite()) throw InvalidInput(source + ": normal " + std::to_string(i) + " is not finite");
-    for (std::size_t t = 0; t < mesh.triangle_normals.size(); ++t)
-        for (const auto i : mesh.triangle_normals[t])
-            if (i < -1 || i >= std::int64_t(mesh.normals.size()))
-                throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to normal " + std::to_string(i) + ", the mesh has " +
-                                   std::to_string(mesh.normals.size()));
+    // Per-corner values (texture coordinates, normals): each finite, each corner's index within them or -1.
+    auto per_corner = [&](const auto& values, const std::vector<std::array<std::int32_t, 3>>& of_corner, const std::string& what) {
+        for (std::size_t i = 0; i < values.size(); ++i)
+            if (!values[i].allFinite()) throw InvalidInput(source + ": " + what + " " + std::to_string(i) + " is not finite");
+        for (std::size_t t = 0; t < of_corner.size(); ++t)
+            for (const auto i : of_corner[t])
+                if (i < -1 || i >= std::int64_t(values.size()))
+                    throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to " + what + " " + std::to_string(i) + ", the mesh has " +
+                                       std::to_string(values.size()));
+    };
+    per_corner(mesh.uvs, mesh.triangle_uvs, "texture coordinate");
+    per_corner(mesh.normals, mesh.triangle_normals, "normal");
     for (std::size_t t = 0; t < mesh.triangle_materials.size(); ++t)
         if (mesh.triangle_materials[t] < -1 || mesh.triangle_materials[t] >= std::int64_t(mesh.materials.size()))
             throw InvalidInput(source + ": triangle " + std::to_string(t) + " refers to material " + std::to_string(mesh.triangle_materials[t]) + ", the mesh has " +

@@ -841,11 +841,7 @@ Warp::Warp(std::shared_ptr<const WarpDomain> domain, const Lattice& lattice, con
     if (lattice.size() != s.domain.lattice.size()) throw InvalidInput("warp: the lattice's size differs from the domain's");
     s.lattice = lattice;
     s.options = options;
-    s.memory_limit = options.max_memory_bytes;
-    if (s.memory_limit == 0) {
-        s.memory_limit = available_memory_bytes() / 10 * 9;
-        if (s.memory_limit == 0) s.memory_limit = std::numeric_limits<std::uint64_t>::max(); // unknown: nothing to check against
-    }
+    s.memory_limit = memory_limit(options.max_memory_bytes);
     s.splatter = std::make_unique<Splatter>(s.domain, s.domain.target_origin, s.domain.target_voxel_size);
     s.boxes.resize(s.splatter->region_count());
     Progress progress(options.progress, "warp");

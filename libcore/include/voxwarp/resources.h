@@ -13,6 +13,10 @@ std::uint64_t available_memory_bytes();
 /// Peak resident memory of this process so far (getrusage), bytes.
 std::uint64_t peak_resident_bytes();
 
+/// The limit a request is held to: `limit_bytes`, or, when it is 0, 90 % of the memory available now; the largest
+/// value when that is unknown (nothing to check against).
+std::uint64_t memory_limit(std::uint64_t limit_bytes);
+
 /// Throw ResourceLimit when `bytes` exceeds `limit_bytes`, or, when `limit_bytes` is 0, 90 % of the
 /// memory available now. The message names `what` and gives the estimate, the limit and the override.
 void require_memory(std::uint64_t bytes, std::uint64_t limit_bytes, const std::string& what);
