@@ -167,7 +167,9 @@ TEST_F(Cli, EveryClassOfBadInputIsRefusedCleanly) {
 }
 
 TEST_F(Cli, DeformIsByteIdenticalForAnyThreadCount) {
-    const std::string args = " deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -r 64 -q -o ";
+    // At 200 the output has enough vertices (130 K) for the scheduler to split them differently for one thread and
+    // two, which once changed the snapped vertices in their last bits (a warm start carried across its ranges).
+    const std::string args = " deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -r 200 -q -o ";
     ASSERT_EQ(run("--threads 1" + args + file("one.obj")).code, 0);
     ASSERT_EQ(run("--threads 2" + args + file("two.obj")).code, 0);
     auto bytes = [](const std::string& path) {

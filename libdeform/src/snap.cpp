@@ -33,7 +33,42 @@ using Point = Kernel::Point_3;
 using Triangle = Kernel::Triangle_3;
 using Iterator = std::vector<Triangle>::const_iterator;
 using Primitive = CGAL::AABB_triangle_primitive<Kernel, Iterator>;
-using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
+
+Eigen::Vector3d closest_barycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c);
+
+/// CGAL's AABB traits with the two tests a nearest-point query makes, per node and per triangle, done directly:
+/// a box's squared distance, and the closest point of a triangle by Ericson's regions. CGAL's generic ones build
+/// a sphere per node and a plane per triangle, and took half of the query's time (and the query, half of finding
+/// the sources).
+struct Traits : CGAL::AABB_traits<Kernel, Primitive> {
+    struct Closest_point {
+        /// The point of `primitive` nearest `p` when it is no farther than `bound`, else `bound` itself (CGAL's
+        /// traversal checks for that very point to see that nothing changed).
+        Point operator()(const Point& p, const Primitive& primitive, const Point& bound) const {
+            const Triangle& t = primitive.datum();
+            const auto eigen = [](const Point& x) { return Eigen::Vector3d(x.x(), x.y(), x.z()); };
+            const Eigen::Vector3d q = eigen(p), a = eigen(t[0]), b = eigen(t[1]), c = eigen(t[2]);
+            const Eigen::Vector3d w = closest_barycentric(q, a, b, c);
+            const Eigen::Vector3d x = w[0] * a + w[1] * b + w[2] * c;
+            return (x - q).squaredNorm() > (eigen(bound) - q).squaredNorm() ? bound : Point(x.x(), x.y(), x.z());
+        }
+    };
+    Closest_point closest_point_object() const { return {}; }
+    struct Compare_distance {
+        /// SMALLER when the box comes within `bound`'s distance of `p` (CGAL's closed sphere-box test).
+        CGAL::Comparison_result operator()(const Point& p, const CGAL::Bbox_3& box, const Point& bound) const {
+            double d2 = 0;
+            for (int a = 0; a < 3; ++a) {
+                const double x = p[a], below = box.min(a) - x, above = x - box.max(a);
+                if (below > 0) d2 += below * below;
+                else if (above > 0) d2 += above * above;
+            }
+            return d2 <= CGAL::squared_distance(p, bound) ? CGAL::SMALLER : CGAL::LARGER;
+        }
+    };
+    Compare_distance compare_distance_object() const { return {}; }
+};
+using Tree = CGAL::AABB_tree<Traits>;
 using Hint = Tree::Point_and_primitive_id;
 
 /// The parameter of `world` on lattice `L` by Newton's method from `stu` (Lattice::parameter_of without its
@@ -68,13 +103,14 @@ public:
         for (std::size_t k = steps_.size(); k-- > 0;) {
             const WarpStep& s = steps_[k];
             Previous& p = previous_[k];
-            const Eigen::Vector3d guess = p.valid && (point - p.world).norm() < near_ ? Eigen::Vector3d(p.stu + p.J.partialPivLu().solve(point - p.world))
+            const Eigen::Vector3d guess = p.valid && (point - p.world).norm() < near_ ? Eigen::Vector3d(p.stu + p.inverse * (point - p.world))
                                                                                      : undeformed_parameter(s.moved, point);
             Eigen::Matrix3d moved;
             const auto stu = invert(s.moved, point, guess, moved, tolerance_);
-            p.valid = bool(stu);
+            p.inverse = moved.inverse(); // closed form, once per point (the next guess needs only a product)
+            p.valid = bool(stu) && p.inverse.allFinite();
             if (!stu) return std::nullopt;
-            p.world = point, p.stu = *stu, p.J = moved;
+            p.world = point, p.stu = *stu;
             // d moved / d rest = (d moved / d stu) (d rest / d stu)^-1; the steps compose last-to-first on the right.
             if (s.rest.placement() == Placement::uniform) {
                 jacobian = jacobian * moved * s.rest.spacing().cwiseInverse().asDiagonal();
@@ -91,7 +127,7 @@ private:
     struct Previous {
         bool valid = false;
         Eigen::Vector3d world, stu;
-        Eigen::Matrix3d J;
+        Eigen::Matrix3d inverse; ///< of the moved lattice's Jacobian at stu
     };
     const std::vector<WarpStep>& steps_;
     std::vector<Previous> previous_;
@@ -253,6 +289,9 @@ namespace snap_internal {
 /// Vertices are sorted by cell of `radius` (keys z-major, then y, then x), so the three x-neighbours of a cell are
 /// one run of the sorted array, and walking the cells in order, each of the nine runs a cell needs starts at or
 /// after where the previous cell's did: nine cursors that only move forward, no hash table and no cache misses.
+/// Most of a surface has no other sheet within reach, so each cell keeps the cone of its vertices' normals (a unit
+/// axis and the half-angle about it), and a cell whose cone cannot hold a normal looking against the vertex's, or
+/// against the whole cone of the cell at hand, is passed over without reading its vertices.
 std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::vector<Eigen::Vector3d>& normal, double radius) {
     const std::size_t n = P.size();
     const double inverse = 1 / radius;
@@ -267,9 +306,46 @@ std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::
     });
     tbb::parallel_sort(sorted.begin(), sorted.end());
     std::vector<std::size_t> cells; // first index of each cell's run
-    for (std::size_t i = 0; i < n; ++i)
+    std::vector<std::int32_t> cell_of(n);
+    for (std::size_t i = 0; i < n; ++i) {
         if (i == 0 || sorted[i].first != sorted[i - 1].first) cells.push_back(i);
+        cell_of[i] = std::int32_t(cells.size() - 1);
+    }
     cells.push_back(n);
+    // Each cell's normal cone: unit normals (zero for a vertex in no face, which never counts), their mean
+    // direction, and the sine and cosine of the widest angle from it (an empty or degenerate cone: half-angle pi).
+    struct Cone {
+        Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+        double sin = 0, cos = -1;
+    };
+    std::vector<Eigen::Vector3d> unit(n);
+    std::vector<Cone> cone(cells.size() - 1);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cone.size(), 1024), [&](const auto& r) {
+        for (std::size_t c = r.begin(); c != r.end(); ++c) {
+            Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+            for (std::size_t a = cells[c]; a < cells[c + 1]; ++a) {
+                const Eigen::Vector3d& m = normal[std::size_t(sorted[a].second)];
+                const double length = m.norm();
+                unit[a] = length > 0 && std::isfinite(length) ? Eigen::Vector3d(m / length) : Eigen::Vector3d::Zero();
+                sum += unit[a];
+            }
+            Cone& k = cone[c];
+            if (!(sum.norm() > 0)) continue;
+            k.axis = sum.normalized();
+            k.cos = 1;
+            for (std::size_t a = cells[c]; a < cells[c + 1]; ++a)
+                if (!unit[a].isZero()) k.cos = std::min(k.cos, unit[a].dot(k.axis));
+            k.cos = std::clamp(k.cos - 1e-9, -1.0, 1.0); // rounding must not narrow the cone
+            k.sin = std::sqrt(1 - k.cos * k.cos);
+        }
+    });
+    // Every normal within the cones of c and d has a non-negative dot product with every other when the angle
+    // between the axes plus both half-angles stays under 90 degrees: cos(angle) > sin(half c + half d), with
+    // cos(half c + half d) > 0.
+    auto agree = [](const Cone& c, const Cone& d) {
+        if (c.cos < 0 || d.cos < 0 || c.cos * d.cos - c.sin * d.sin <= 0) return false;
+        return c.axis.dot(d.axis) > c.sin * d.cos + c.cos * d.sin;
+    };
     std::vector<double> out(n, radius * radius);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size() - 1, 256), [&](const auto& r) {
         std::array<std::size_t, 9> cursor{};
@@ -284,13 +360,23 @@ std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::
                 if (!started)
                     i = std::size_t(std::lower_bound(sorted.begin(), sorted.end(), std::pair<std::uint64_t, std::int32_t>(lo, -1)) - sorted.begin());
                 while (i < n && sorted[i].first < lo) ++i;
-                for (std::size_t j = i; j < n && sorted[j].first <= hi; ++j) {
-                    const std::size_t w = std::size_t(sorted[j].second);
-                    for (std::size_t a = cells[c]; a < cells[c + 1]; ++a) {
-                        const std::size_t v = std::size_t(sorted[a].second);
-                        const double d2 = (P[w] - P[v]).squaredNorm();
-                        if (d2 < out[v] && normal[w].dot(normal[v]) < 0) out[v] = d2;
+                for (std::size_t j = i; j < n && sorted[j].first <= hi;) {
+                    const std::size_t e = std::size_t(cell_of[j]), end = cells[e + 1];
+                    const Cone& other = cone[e];
+                    if (!agree(cone[c], other)) {
+                        for (std::size_t a = cells[c]; a < cells[c + 1]; ++a) {
+                            // A unit normal is a cone of half-angle 0: it agrees with the cell's when their dot
+                            // product exceeds the cell's sine.
+                            if (!unit[a].isZero() && other.cos >= 0 && unit[a].dot(other.axis) > other.sin) continue;
+                            const std::size_t v = std::size_t(sorted[a].second);
+                            for (std::size_t b = j; b < end; ++b) {
+                                const std::size_t w = std::size_t(sorted[b].second);
+                                const double d2 = (P[w] - P[v]).squaredNorm();
+                                if (d2 < out[v] && normal[w].dot(normal[v]) < 0) out[v] = d2;
+                            }
+                        }
                     }
+                    j = end;
                 }
             }
             started = true;
@@ -349,16 +435,22 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSu
     const double reach = options.reach_voxels * options.voxel_size;
     std::vector<SourcePoint> out(output.vertices.size());
     const double near = 4 * options.voxel_size;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, out.size(), 512), [&](const auto& r) {
-        Puller pull(steps, near, 1e-5 * options.voxel_size); // a hundred-thousandth of a voxel is exact for a mesh
-        std::optional<Hint> hint;
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            if (normals[v].squaredNorm() == 0) continue; // in no face
-            Eigen::Matrix3d J;
-            const auto q = pull(output.vertices[v], J);
-            if (!q) continue;
-            // Normals go back with the transpose of the map's Jacobian (they are covectors).
-            out[v] = surface.nearest(*q, J.transpose() * normals[v], reach, hint, near);
+    // Newton's warm start and the tree's hint carry from one vertex to the next within a block, so the blocks are
+    // fixed (not the scheduler's ranges, which vary from run to run): the answers, equal only to Newton's
+    // tolerance whatever the start, are then the same bits for any thread count.
+    constexpr std::size_t kBlock = 512;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (out.size() + kBlock - 1) / kBlock), [&](const auto& blocks) {
+        for (std::size_t block = blocks.begin(); block != blocks.end(); ++block) {
+            Puller pull(steps, near, 1e-5 * options.voxel_size); // a hundred-thousandth of a voxel is exact for a mesh
+            std::optional<Hint> hint;
+            for (std::size_t v = block * kBlock; v != std::min(out.size(), (block + 1) * kBlock); ++v) {
+                if (normals[v].squaredNorm() == 0) continue; // in no face
+                Eigen::Matrix3d J;
+                const auto q = pull(output.vertices[v], J);
+                if (!q) continue;
+                // Normals go back with the transpose of the map's Jacobian (they are covectors).
+                out[v] = surface.nearest(*q, J.transpose() * normals[v], reach, hint, near);
+            }
         }
     });
     return out;
@@ -425,15 +517,20 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
         return false;
     };
     // Put back the snapped corners of every face that fails, until none does (each pass puts back at least one
-    // vertex, and a face with no snapped corner cannot fail). Failures are rare: a few passes over the faces.
+    // vertex, and a face with no snapped corner cannot fail). Only a face with a corner put back in the last pass
+    // can fail anew, so later passes look at those alone. Failures are rare: a few short passes.
+    std::vector<char> changed;
     for (;;) {
         std::vector<std::int32_t> put_back = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::int32_t>(),
             [&](const auto& r, std::vector<std::int32_t> found) {
-                for (std::size_t f = r.begin(); f != r.end(); ++f)
-                    if (fails(checks[f]))
-                        for (auto i : checks[f])
+                for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                    const auto& t = checks[f];
+                    if (!changed.empty() && !changed[std::size_t(t[0])] && !changed[std::size_t(t[1])] && !changed[std::size_t(t[2])]) continue;
+                    if (fails(t))
+                        for (auto i : t)
                             if (snapped[std::size_t(i)]) found.push_back(i);
+                }
                 return found;
             },
             [](std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
@@ -441,7 +538,8 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
                 return a;
             });
         if (put_back.empty()) break;
-        for (auto i : put_back) snapped[std::size_t(i)] = 0;
+        changed.assign(n, 0);
+        for (auto i : put_back) snapped[std::size_t(i)] = 0, changed[std::size_t(i)] = 1;
     }
     SnapReport report;
     for (std::size_t v = 0; v < n; ++v) {

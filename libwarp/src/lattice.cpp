@@ -146,9 +146,21 @@ Eigen::Vector3d Lattice::combine(const std::array<int, 3>& r, const std::array<d
 
 Eigen::Vector3d Lattice::evaluate(const Eigen::Vector3d& stu) const {
     std::array<int, 3> r;
-    std::array<double, 64> w;
-    weights(stu, r, w);
-    return combine(r, w);
+    AxisBasis b;
+    basis_at(size_, stu, r, b);
+    // Contracted along s, then t, then u (as the Jacobian's overload): 48 + 12 + 3 products instead of 64 weights
+    // and 64 more.
+    Eigen::Vector3d p = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k) {
+        Eigen::Vector3d v_k = Eigen::Vector3d::Zero();
+        for (int j = 0; j < 4; ++j) {
+            const Eigen::Vector3d* row = &point(r[0], r[1] + j, r[2] + k);
+            const Eigen::Vector3d v = b[0][0] * row[0] + b[0][1] * row[1] + b[0][2] * row[2] + b[0][3] * row[3];
+            v_k += b[1][std::size_t(j)] * v;
+        }
+        p += b[2][std::size_t(k)] * v_k;
+    }
+    return p;
 }
 
 Eigen::Matrix3d Lattice::jacobian(const Eigen::Vector3d& stu) const {
