@@ -69,7 +69,8 @@ private:
 /// For each vertex of `output` (the surface after `steps`), its source point on `input`: the nearest point of the
 /// input surface to the pulled-back vertex among faces whose normal, pushed forward, agrees with the vertex's
 /// normal on the output (so that a sheet across a gap thinner than the reach is not chosen), within reach.
-/// Parallel (oneTBB). @throw InvalidInput when voxel_size is not positive.
+/// Parallel (oneTBB); the answer does not depend on the thread count. @throw InvalidInput when voxel_size is not
+/// positive.
 std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps,
                                       const SnapOptions& options);
 /// The same, indexing `input` for this one call.
