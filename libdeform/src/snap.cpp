@@ -38,8 +38,7 @@ Eigen::Vector3d closest_barycentric(const Eigen::Vector3d& p, const Eigen::Vecto
 
 /// CGAL's AABB traits with the two tests a nearest-point query makes, per node and per triangle, done directly:
 /// a box's squared distance, and the closest point of a triangle by Ericson's regions. CGAL's generic ones build
-/// a sphere per node and a plane per triangle, and took half of the query's time (and the query, half of finding
-/// the sources).
+/// a sphere per node and a plane per triangle: with these, the bunny's queries at 512 took 0.18 s instead of 0.25.
 struct Traits : CGAL::AABB_traits<Kernel, Primitive> {
     struct Closest_point {
         /// The point of `primitive` nearest `p` when it is no farther than `bound`, else `bound` itself (CGAL's
