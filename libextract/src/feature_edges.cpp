@@ -45,12 +45,13 @@ void closest_between_segments(const Eigen::Vector3d& p0, const Eigen::Vector3d& 
 /// The input's sharp edges hashed by the voxels their bounding boxes touch.
 class EdgeGrid {
 public:
-    EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v) : edges_(edges), voxmap_(v) {
+    EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v) : edges_(edges), voxmap_(v), marks_(v) {
         for (std::size_t i = 0; i < edges.size(); ++i) {
             const Eigen::Vector3d qa = v.index_of(edges[i].first), qb = v.index_of(edges[i].second);
             const Index3 lo = cell_containing(qa.cwiseMin(qb)), hi = cell_containing(qa.cwiseMax(qb));
             if (hi[0] - lo[0] > 8 || hi[1] - lo[1] > 8 || hi[2] - lo[2] > 8) continue; // not cut for this voxmap
             cells_.add(qa.cwiseMin(qb), qa.cwiseMax(qb), std::uint32_t(i));
+            marks_.mark(lo, hi);
         }
     }
     /// The sharp edges' point nearest the segment a b, where that is within `reach` of it, nearest it between its
@@ -60,6 +61,7 @@ public:
         const Eigen::Vector3d grow = Eigen::Vector3d::Constant(reach / voxmap_.voxel_size());
         const Eigen::Vector3d qa = voxmap_.index_of(a), qb = voxmap_.index_of(b);
         const Index3 lo = cell_containing(qa.cwiseMin(qb) - grow), hi = cell_containing(qa.cwiseMax(qb) + grow);
+        if (!marks_.any(lo, hi)) return false;
         double best = reach;
         std::uint32_t chosen = 0;
         bool found = false;
@@ -82,6 +84,7 @@ private:
     const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges_;
     const SparseVoxmap& voxmap_;
     CellBuckets cells_;
+    CoarseMarks marks_; ///< the cells holding an edge
 };
 
 std::uint64_t directed(std::int32_t a, std::int32_t b) { return std::uint64_t(std::uint32_t(a)) << 32 | std::uint32_t(b); }

@@ -27,36 +27,21 @@ namespace {
 /// A feature surface's triangles hashed by the voxels their bounding boxes touch.
 class TriangleGrid {
 public:
-    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s) {
-        for (int a = 0; a < 3; ++a) coarse_dims_[std::size_t(a)] = (v.dims()[std::size_t(a)] + 2 * kMargin) / kCoarse + 1;
-        near_.assign(std::size_t(coarse_dims_[0] * coarse_dims_[1] * coarse_dims_[2]), 0);
+    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s), near_(v) {
         for (std::size_t t = 0; t < s.triangles.size(); ++t) {
             const auto& f = s.triangles[t];
             const Eigen::Vector3d &a = s.vertices[std::size_t(f[0])], &b = s.vertices[std::size_t(f[1])], &c = s.vertices[std::size_t(f[2])];
             const Eigen::Vector3d lo = v.index_of(a.cwiseMin(b).cwiseMin(c)), hi = v.index_of(a.cwiseMax(b).cwiseMax(c));
             if (((hi - lo).array() > 64).any()) continue; // not a voxel-sized piece: the surface was not cut for this voxmap
             cells_.add(lo, hi, std::uint32_t(t));
-            // Its cells grown by one, so that a cell none of whose neighbours holds a triangle is known at a glance.
+            // Its cells grown by one: hit() and nearest() around a cell read it and its neighbours.
             const Index3 first = cell_containing(lo), last = cell_containing(hi);
-            Index3 from, to;
-            for (std::size_t k = 0; k < 3; ++k) from[k] = coarse(first[k] - 1), to[k] = coarse(last[k] + 1);
-            for (std::int64_t z = std::max<std::int64_t>(from[2], 0); z <= std::min(to[2], coarse_dims_[2] - 1); ++z)
-                for (std::int64_t y = std::max<std::int64_t>(from[1], 0); y <= std::min(to[1], coarse_dims_[1] - 1); ++y)
-                    for (std::int64_t x = std::max<std::int64_t>(from[0], 0); x <= std::min(to[0], coarse_dims_[0] - 1); ++x)
-                        near_[std::size_t(x + coarse_dims_[0] * (y + coarse_dims_[1] * z))] = 1;
+            near_.mark({first[0] - 1, first[1] - 1, first[2] - 1}, {last[0] + 1, last[1] + 1, last[2] + 1});
         }
     }
-    /// False when no cell within one of `c` (a cell of the voxmap or its border) holds a triangle: hit() and
-    /// nearest() around it would find nothing, and their 29 hash lookups per vertex were most of the feature
-    /// mesher's pass over every vertex.
-    bool near(const Index3& c) const {
-        Index3 k;
-        for (std::size_t a = 0; a < 3; ++a) {
-            k[a] = coarse(c[a]);
-            if (k[a] < 0 || k[a] >= coarse_dims_[a]) return false;
-        }
-        return near_[std::size_t(k[0] + coarse_dims_[0] * (k[1] + coarse_dims_[1] * k[2]))] != 0;
-    }
+    /// False when no cell within one of `c` holds a triangle: hit() and nearest() around it would find nothing, and
+    /// their 29 hash lookups per vertex were most of the pass over every vertex.
+    bool near(const Index3& c) const { return near_.any(c, c); }
     /// Where the segment a -> b meets the surface (parameter t in [0, 1] and the face's unit normal), the meeting
     /// nearest to `near_t`; false when it meets none of the triangles in the voxels given.
     bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<std::uint64_t, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
@@ -118,12 +103,9 @@ private:
         const double denom = 1.0 / (va + vb + vc);
         return a + ab * (vb * denom) + ac * (vc * denom);
     }
-    static constexpr std::int64_t kCoarse = 8, kMargin = 8; ///< coarse blocks of 8^3 cells, from cell -8 on
-    static std::int64_t coarse(std::int64_t cell) { return (cell + kMargin) >= 0 ? (cell + kMargin) / kCoarse : -1; }
     const TriangleMesh& surface_;
     CellBuckets cells_;
-    Index3 coarse_dims_{};
-    std::vector<std::uint8_t> near_; ///< per coarse block: some cell in it lies within one of a triangle's cells
+    CoarseMarks near_; ///< the cells within one of a triangle's
 };
 
 /// A vertex's grid edge: the low voxel and the axis (or axis -1 for a vertex that is not on one, a fan centre).
@@ -311,9 +293,16 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                 t = exit;
             }
         }
+    CoarseMarks candidate_blocks(voxmap);
+    for (const std::uint64_t key : candidate_cells) {
+        const Index3 c{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
+        candidate_blocks.mark(c, c);
+    }
     std::map<std::uint64_t, std::vector<std::uint32_t>> cell_triangles; // ordered: the output does not depend on hashing
     for (std::size_t f = 0; f < nt; ++f) {
-        const std::uint64_t key = cell_key(cell_of(mesh.triangles[f]));
+        const Index3 cell = cell_of(mesh.triangles[f]);
+        if (!candidate_blocks.any(cell, cell)) continue;
+        const std::uint64_t key = cell_key(cell);
         if (candidate_cells.count(key)) cell_triangles[key].push_back(std::uint32_t(f));
     }
 

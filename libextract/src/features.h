@@ -4,6 +4,7 @@
 
 #include <voxwarp/extract.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -43,6 +44,49 @@ public:
 
 private:
     std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
+};
+
+/// Which 8^3 blocks of cells hold a marked cell: a byte per block over the voxmap and 8 cells around it, so that a
+/// cell or box with nothing marked in it is known without a hash lookup (the buckets above are hash maps, and a
+/// pass over every vertex or triangle spent most of its time asking them about empty cells).
+class CoarseMarks {
+public:
+    explicit CoarseMarks(const SparseVoxmap& v) {
+        for (std::size_t a = 0; a < 3; ++a) dims_[a] = (v.dims()[a] + 2 * kMargin) / kSide + 1;
+        marks_.assign(std::size_t(dims_[0] * dims_[1] * dims_[2]), 0);
+    }
+    /// Mark the cells in [lo, hi] (inclusive; those beyond the margin are never asked about).
+    void mark(const Index3& lo, const Index3& hi) {
+        Index3 a, b;
+        if (!range(lo, hi, a, b)) return;
+        for (std::int64_t z = a[2]; z <= b[2]; ++z)
+            for (std::int64_t y = a[1]; y <= b[1]; ++y)
+                for (std::int64_t x = a[0]; x <= b[0]; ++x) marks_[std::size_t(x + dims_[0] * (y + dims_[1] * z))] = 1;
+    }
+    /// False when no cell in [lo, hi] is marked (true may still mean none: blocks are coarse).
+    bool any(const Index3& lo, const Index3& hi) const {
+        Index3 a, b;
+        if (!range(lo, hi, a, b)) return false;
+        for (std::int64_t z = a[2]; z <= b[2]; ++z)
+            for (std::int64_t y = a[1]; y <= b[1]; ++y)
+                for (std::int64_t x = a[0]; x <= b[0]; ++x)
+                    if (marks_[std::size_t(x + dims_[0] * (y + dims_[1] * z))]) return true;
+        return false;
+    }
+
+private:
+    static constexpr std::int64_t kSide = 8, kMargin = 8;
+    /// The blocks holding cells [lo, hi], clipped to the grid; false when none is in it.
+    bool range(const Index3& lo, const Index3& hi, Index3& a, Index3& b) const {
+        for (std::size_t k = 0; k < 3; ++k) {
+            a[k] = std::max<std::int64_t>(0, block(lo[k])), b[k] = std::min(dims_[k] - 1, block(hi[k]));
+            if (a[k] > b[k]) return false;
+        }
+        return true;
+    }
+    static std::int64_t block(std::int64_t cell) { return cell + kMargin >= 0 ? (cell + kMargin) / kSide : -1; }
+    Index3 dims_{};
+    std::vector<std::uint8_t> marks_;
 };
 
 /// `mesh`, marching cubes' output for `voxmap` (every vertex on a grid edge, every triangle in one cell), with
