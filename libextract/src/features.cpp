@@ -294,10 +294,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             }
         }
     CoarseMarks candidate_blocks(voxmap);
-    for (const std::uint64_t key : candidate_cells) {
-        const Index3 c{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
-        candidate_blocks.mark(c, c);
-    }
+    for (const std::uint64_t key : candidate_cells) candidate_blocks.mark(key_cell(key), key_cell(key));
     std::map<std::uint64_t, std::vector<std::uint32_t>> cell_triangles; // ordered: the output does not depend on hashing
     for (std::size_t f = 0; f < nt; ++f) {
         const Index3 cell = cell_of(mesh.triangles[f]);
@@ -315,7 +312,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     };
     std::vector<Loop> features;
     for (const auto& [key, faces] : cell_triangles) {
-        const Index3 cell{std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
+        const Index3 cell = key_cell(key);
         internal::DisjointSets joined_faces(faces.size());
         std::map<std::int32_t, std::size_t> owner;
         for (std::size_t i = 0; i < faces.size(); ++i)

@@ -21,6 +21,11 @@ inline std::uint64_t cell_key(const Index3& c) {
     return std::uint64_t(c[0] + 2) | std::uint64_t(c[1] + 2) << 21 | std::uint64_t(c[2] + 2) << 42;
 }
 
+/// The cell a key names (cell_key's inverse).
+inline Index3 key_cell(std::uint64_t key) {
+    return {std::int64_t(key & 0x1fffff) - 2, std::int64_t(key >> 21 & 0x1fffff) - 2, std::int64_t(key >> 42) - 2};
+}
+
 /// The cell (voxel index of its low corner) holding a point given in index space.
 inline Index3 cell_containing(const Eigen::Vector3d& q) {
     return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
