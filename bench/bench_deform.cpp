@@ -8,13 +8,15 @@
 
 namespace voxwarp::bench {
 
-/// With snap (the default) or without: the difference is what finding source points and snapping cost.
-static void deform_bunny_ear(benchmark::State& state, bool snap) {
+/// With snap (the default) or without: the difference is what finding source points and snapping cost. With the
+/// default mesher (marching cubes) or the feature mesher: the difference is what restoring sharp features costs.
+static void deform_bunny_ear(benchmark::State& state, bool snap, Mesher mesher = ExtractOptions{}.mesher) {
     const TriangleMesh& bunny = bunny_mesh();
     static const EditScript script = read_edit_file(std::string(VOXWARP_DATA_DIR) + "/bunny_ear.json");
     DeformOptions options;
     options.voxelize.resolution = int(state.range(0));
     options.snap = snap;
+    options.extract.mesher = mesher;
     for (auto _ : state) {
         DeformReport report;
         benchmark::DoNotOptimize(deform_mesh(bunny, script, options, report));
@@ -22,8 +24,10 @@ static void deform_bunny_ear(benchmark::State& state, bool snap) {
 }
 static void BM_Deform(benchmark::State& state) { deform_bunny_ear(state, true); }
 static void BM_DeformNoSnap(benchmark::State& state) { deform_bunny_ear(state, false); }
+static void BM_DeformFeatures(benchmark::State& state) { deform_bunny_ear(state, true, Mesher::features); }
 BENCHMARK(BM_Deform)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_DeformNoSnap)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_DeformFeatures)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 /// Spot's head turned (data/spot_head.json), with its texture coordinates and material carried or dropped: the
 /// difference is what the transfer costs (source points are found for snapping either way).

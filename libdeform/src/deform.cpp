@@ -279,7 +279,7 @@ TriangleMesh isosurface_near(const SparseVoxmap& voxmap, const Eigen::Vector3d& 
         for (std::int64_t j = 0; j < dims[1]; ++j)
             for (std::int64_t i = 0; i < dims[0]; ++i)
                 window.density[std::size_t(i + dims[0] * (j + dims[1] * k))] = voxmap.at(lo[0] + i, lo[1] + j, lo[2] + k);
-    TriangleMesh mesh = extract(window);
+    TriangleMesh mesh = extract(window, {.mesher = Mesher::marching_cubes}); // where the voxmap's own 0.5 level lies
     // Keep faces whose vertices all lie inside the window's grid: the others close the surface at its border.
     TriangleMesh inner;
     inner.vertices = mesh.vertices;
@@ -493,6 +493,9 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     ExtractOptions eo = options.extract;
     eo.progress = options.progress;
     if (sharpen && !features.empty()) eo.feature_surface = &features;
+    // A smooth warp makes no sharp part the input lacks: without sharp edges in the input there is nothing to put
+    // back (and the density's own corners, where a model is thinner than a voxel, are not the model's).
+    if (sharpen && features.empty()) eo.mesher = Mesher::marching_cubes;
     TriangleMesh out = extract(voxmap, eo);
     const SnapOptions so{.voxel_size = voxmap.voxel_size()};
     std::unique_ptr<SourceSurface> own_surface; // the input indexed once for snapping and transfer both

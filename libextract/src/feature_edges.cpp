@@ -42,33 +42,36 @@ void closest_between_segments(const Eigen::Vector3d& p0, const Eigen::Vector3d& 
     else if (t > 1) t = 1, s = std::clamp((b - c) / a, 0.0, 1.0);
 }
 
-/// The input's sharp edges hashed by the voxels their bounding boxes touch.
+/// The input's sharp edges filed by cell (CellBuckets).
 class EdgeGrid {
 public:
-    EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v) : edges_(edges), voxmap_(v), marks_(v) {
+    /// Each edge filed in the cells within `reach` (world units) of its bounding box, so that a query reads only
+    /// the cells its own segment passes through.
+    EdgeGrid(const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& v, double reach)
+        : edges_(edges), voxmap_(v), reach_(reach), cells_(v) {
+        const Eigen::Vector3d grow = Eigen::Vector3d::Constant(reach / v.voxel_size());
         for (std::size_t i = 0; i < edges.size(); ++i) {
             const Eigen::Vector3d qa = v.index_of(edges[i].first), qb = v.index_of(edges[i].second);
             const Index3 lo = cell_containing(qa.cwiseMin(qb)), hi = cell_containing(qa.cwiseMax(qb));
             if (hi[0] - lo[0] > 8 || hi[1] - lo[1] > 8 || hi[2] - lo[2] > 8) continue; // not cut for this voxmap
-            cells_.add(qa.cwiseMin(qb), qa.cwiseMax(qb), std::uint32_t(i));
-            marks_.mark(lo, hi);
+            cells_.add(qa.cwiseMin(qb) - grow, qa.cwiseMax(qb) + grow, std::uint32_t(i));
         }
+        cells_.build();
     }
-    /// The sharp edges' point nearest the segment a b, where that is within `reach` of it, nearest it between its
+    /// The sharp edges' point nearest the segment a b, where that is within the reach of it, nearest it between its
     /// ends and at least `margin` from either (a sharp edge through an end, a feature vertex on another sharp
     /// edge, is no reason to split); with the edge's direction there. False when there is none.
-    bool nearest(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double reach, double margin, Eigen::Vector3d& point, Eigen::Vector3d& direction) const {
-        const Eigen::Vector3d grow = Eigen::Vector3d::Constant(reach / voxmap_.voxel_size());
+    bool nearest(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double margin, Eigen::Vector3d& point, Eigen::Vector3d& direction) const {
         const Eigen::Vector3d qa = voxmap_.index_of(a), qb = voxmap_.index_of(b);
-        const Index3 lo = cell_containing(qa.cwiseMin(qb) - grow), hi = cell_containing(qa.cwiseMax(qb) + grow);
-        if (!marks_.any(lo, hi)) return false;
-        double best = reach;
+        const Index3 lo = cell_containing(qa.cwiseMin(qb)), hi = cell_containing(qa.cwiseMax(qb));
+        if (!cells_.any(lo, hi)) return false;
+        double best = reach_;
         std::uint32_t chosen = 0;
         bool found = false;
         for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
             for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
                 for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
-                    for (std::uint32_t i : cells_.at(cell_key({x, y, z}))) {
+                    for (std::uint32_t i : cells_.at({x, y, z})) {
                         const auto& [q0, q1] = edges_[i];
                         double s = 0, t = 0;
                         closest_between_segments(a, b, q0, q1, s, t);
@@ -83,8 +86,8 @@ public:
 private:
     const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges_;
     const SparseVoxmap& voxmap_;
+    double reach_;
     CellBuckets cells_;
-    CoarseMarks marks_; ///< the cells holding an edge
 };
 
 std::uint64_t directed(std::int32_t a, std::int32_t b) { return std::uint64_t(std::uint32_t(a)) << 32 | std::uint32_t(b); }
@@ -100,7 +103,7 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     if (edges.empty()) return;
     const double h = voxmap.voxel_size();
     const double reach = 0.6 * h; // deeper than marching cubes' chamfer of a right-angled edge
-    const EdgeGrid grid(edges, voxmap);
+    const EdgeGrid grid(edges, voxmap, reach);
 
     // Each undirected mesh edge once (closed and consistently wound, it runs a -> b with a < b in one of its two
     // triangles); not one whose ends' normals agree (both on one face).
@@ -112,13 +115,16 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     tbb::enumerable_thread_specific<std::vector<Split>> found;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const auto& range) {
         auto& local = found.local();
-        for (std::size_t i = range.begin(); i != range.end(); ++i)
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            // A triangle none of whose corners has a normal is far from the feature surface, and so from its edges.
+            if (!known(triangles[i][0]) && !known(triangles[i][1]) && !known(triangles[i][2])) continue;
             for (int c = 0; c < 3; ++c) {
                 const std::int32_t a = triangles[i][std::size_t(c)], b = triangles[i][std::size_t((c + 1) % 3)];
                 if (a > b || (known(a) && known(b) && normals[std::size_t(a)].dot(normals[std::size_t(b)]) >= cos_feature)) continue;
                 Eigen::Vector3d point = Eigen::Vector3d::Zero(), along = Eigen::Vector3d::Zero();
-                if (grid.nearest(vertices[std::size_t(a)], vertices[std::size_t(b)], reach, 0.02 * h, point, along)) local.push_back({a, b, point, along});
+                if (grid.nearest(vertices[std::size_t(a)], vertices[std::size_t(b)], 0.02 * h, point, along)) local.push_back({a, b, point, along});
             }
+        }
     });
     std::vector<Split> splits;
     for (const auto& local : found) splits.insert(splits.end(), local.begin(), local.end());
@@ -129,14 +135,21 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     std::vector<std::uint8_t> touched(vertices.size(), 0);
     for (const auto& s : splits) touched[std::size_t(s.a)] = touched[std::size_t(s.b)] = 1;
     std::unordered_map<std::uint64_t, std::uint32_t> holder;
+    // Only edges between touched vertices can be asked about.
+    auto is_touched = [&](std::int32_t v) { return std::size_t(v) < touched.size() && touched[std::size_t(v)]; };
+    holder.reserve(4 * splits.size());
     auto enter = [&](std::uint32_t i) {
         const Triangle& t = triangles[i];
-        for (int c = 0; c < 3; ++c) holder[directed(t[std::size_t(c)], t[std::size_t((c + 1) % 3)])] = i;
+        for (int c = 0; c < 3; ++c) {
+            const std::int32_t a = t[std::size_t(c)], b = t[std::size_t((c + 1) % 3)];
+            if (is_touched(a) && is_touched(b)) holder[directed(a, b)] = i;
+        }
     };
-    for (std::size_t i = 0; i < triangles.size(); ++i) {
-        const Triangle& t = triangles[i];
-        if (touched[std::size_t(t[0])] | touched[std::size_t(t[1])] | touched[std::size_t(t[2])]) enter(std::uint32_t(i));
-    }
+    for (const std::uint32_t i : select_in_parallel(triangles.size(), [&](std::size_t i) {
+             const Triangle& t = triangles[i];
+             return (touched[std::size_t(t[0])] | touched[std::size_t(t[1])] | touched[std::size_t(t[2])]) != 0;
+         }))
+        enter(i);
     auto third = [](const Triangle& t, std::int32_t a, std::int32_t b) {
         for (auto v : t)
             if (v != a && v != b) return v;

@@ -24,31 +24,36 @@ namespace voxwarp::extract_internal {
 
 namespace {
 
-/// A feature surface's triangles hashed by the voxels their bounding boxes touch.
+/// A feature surface's triangles filed by the cells their bounding boxes touch (CellBuckets).
 class TriangleGrid {
 public:
-    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s), near_(v) {
+    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s), cells_(v), near_(v), boxes_(s.triangles.size()) {
         for (std::size_t t = 0; t < s.triangles.size(); ++t) {
             const auto& f = s.triangles[t];
             const Eigen::Vector3d &a = s.vertices[std::size_t(f[0])], &b = s.vertices[std::size_t(f[1])], &c = s.vertices[std::size_t(f[2])];
             const Eigen::Vector3d lo = v.index_of(a.cwiseMin(b).cwiseMin(c)), hi = v.index_of(a.cwiseMax(b).cwiseMax(c));
+            boxes_[t] = {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)};
             if (((hi - lo).array() > 64).any()) continue; // not a voxel-sized piece: the surface was not cut for this voxmap
             cells_.add(lo, hi, std::uint32_t(t));
             // Its cells grown by one: hit() and nearest() around a cell read it and its neighbours.
             const Index3 first = cell_containing(lo), last = cell_containing(hi);
             near_.mark({first[0] - 1, first[1] - 1, first[2] - 1}, {last[0] + 1, last[1] + 1, last[2] + 1});
         }
+        cells_.build();
     }
-    /// False when no cell within one of `c` holds a triangle: hit() and nearest() around it would find nothing, and
-    /// their 29 hash lookups per vertex were most of the pass over every vertex.
+    /// False when no cell within one of `c` holds a triangle (true may still mean none: blocks are coarse): hit()
+    /// and nearest() around it would find nothing.
     bool near(const Index3& c) const { return near_.any(c, c); }
     /// Where the segment a -> b meets the surface (parameter t in [0, 1] and the face's unit normal), the meeting
     /// nearest to `near_t`; false when it meets none of the triangles in the voxels given.
-    bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<std::uint64_t, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
+    bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<Index3, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
         const Eigen::Vector3d d = b - a;
         double best = std::numeric_limits<double>::infinity();
-        for (const std::uint64_t key : voxels)
-            for (std::uint32_t t : cells_.at(key)) {
+        const Eigen::Vector3d lo = a.cwiseMin(b), hi = a.cwiseMax(b);
+        for (const Index3& cell : voxels)
+            for (std::uint32_t t : cells_.at(cell)) {
+                const auto& box = boxes_[t];
+                if ((box.first.array() > hi.array()).any() || (box.second.array() < lo.array()).any()) continue; // boxes apart
                 const auto& f = surface_.triangles[t];
                 const Eigen::Vector3d &p = surface_.vertices[std::size_t(f[0])], &q = surface_.vertices[std::size_t(f[1])], &r = surface_.vertices[std::size_t(f[2])];
                 const double t_hit = internal::line_meets_triangle(a, d, p, q, r, 1e-9);
@@ -69,7 +74,11 @@ public:
         for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
                 for (int dx = -1; dx <= 1; ++dx)
-                    for (std::uint32_t t : cells_.at(cell_key({c[0] + dx, c[1] + dy, c[2] + dz}))) {
+                    for (std::uint32_t t : cells_.at({c[0] + dx, c[1] + dy, c[2] + dz})) {
+                        // Most triangles in the 27 cells lie beyond the radius: their boxes tell, before the
+                        // closest point (which was most of the pass over the vertices).
+                        const auto& [lo, hi] = boxes_[t];
+                        if ((p.cwiseMax(lo).cwiseMin(hi) - p).squaredNorm() >= best * best) continue;
                         const auto& f = surface_.triangles[t];
                         const Eigen::Vector3d x = closest_on_triangle(p, surface_.vertices[std::size_t(f[0])], surface_.vertices[std::size_t(f[1])], surface_.vertices[std::size_t(f[2])]);
                         const double d = (x - p).norm();
@@ -106,6 +115,7 @@ private:
     const TriangleMesh& surface_;
     CellBuckets cells_;
     CoarseMarks near_; ///< the cells within one of a triangle's
+    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes_; ///< each triangle's bounding box, world units
 };
 
 /// A vertex's grid edge: the low voxel and the axis (or axis -1 for a vertex that is not on one, a fan centre).
@@ -210,21 +220,24 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     const double h = voxmap.voxel_size();
     const double cos_feature = std::cos(options.feature_angle * M_PI / 180.0);
     const std::size_t nv = mesh.vertices.size();
-    std::vector<GridEdge> edges(nv);
-    std::vector<Eigen::Vector3d> normals(nv, Eigen::Vector3d::Zero());
+    std::vector<std::uint8_t> on_grid_edge(nv); // each entry written by the pass below, as the normals' are
+    std::vector<Eigen::Vector3d> normals(nv);
     std::unique_ptr<TriangleGrid> grid;
     if (options.feature_surface && !options.feature_surface->faces.triangles.empty()) grid = std::make_unique<TriangleGrid>(options.feature_surface->faces, voxmap);
 
     // Normals, and near the feature surface the crossings themselves: where the vertex's grid edge meets it (the
     // density's linear zero is off near an edge or corner, where the distance it ramps is not linear along the
-    // grid edge).
+    // grid edge). Given a feature surface, only near it: a smooth warp makes no sharp part the input's sharp edges
+    // do not carry, and this pass over every vertex was a third of the mesher's cost. A vertex left without a
+    // normal is in no candidate cell's loop.
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const auto& range) {
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
-            GridEdge& e = edges[i];
-            e = edge_of(voxmap, mesh.vertices[i]);
-            if (e.axis < 0) continue;
+            normals[i].setZero();
+            GridEdge e = edge_of(voxmap, mesh.vertices[i]);
+            on_grid_edge[i] = e.axis >= 0;
+            if (e.axis < 0 || (grid && !grid->near(e.low))) continue;
             normals[i] = gradient_normal(voxmap, e);
-            if (!grid || !grid->near(e.low)) continue;
+            if (!grid) continue;
             const Eigen::Vector3d a = voxmap.world(double(e.low[0]), double(e.low[1]), double(e.low[2]));
             Eigen::Vector3d b = a;
             b[e.axis] += h;
@@ -233,7 +246,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             double t = e.t;
             Eigen::Vector3d n = Eigen::Vector3d::Zero();
             Eigen::Vector3d x;
-            if (grid->hit(a, b, {cell_key(e.low), cell_key(high)}, e.t, t, n) && n.dot(normals[i]) > 0) {
+            if (grid->hit(a, b, {e.low, high}, e.t, t, n) && n.dot(normals[i]) > 0) {
                 mesh.vertices[i] = a + t * (b - a);
                 normals[i] = n;
                 e.t = t;
@@ -245,24 +258,30 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             }
         }
     });
-
-    // Cells holding a triangle whose corners' normals disagree: the candidates.
     const std::size_t nt = mesh.triangles.size();
-    auto cell_of = [&](const std::array<std::int32_t, 3>& t) {
-        return cell_containing(voxmap.index_of((mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3));
-    };
-    std::vector<std::uint8_t> sharp(nt, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096), [&](const auto& range) {
-        for (std::size_t f = range.begin(); f != range.end(); ++f) {
-            const auto& t = mesh.triangles[f];
+
+    // The triangles looked at from here on: those with a corner that has a normal (all, without a feature surface).
+    // Each one's cell, and whether its corners' normals disagree: its cell is then a candidate.
+    auto known = [&](std::int32_t v) { return !normals[std::size_t(v)].isZero(); };
+    const std::vector<std::uint32_t> looked = select_in_parallel(nt, [&](std::size_t f) {
+        const auto& t = mesh.triangles[f];
+        return known(t[0]) || known(t[1]) || known(t[2]);
+    });
+    std::vector<std::uint64_t> looked_cell(looked.size());
+    std::vector<std::uint8_t> sharp(looked.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, looked.size(), 4096), [&](const auto& range) {
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
+            const auto& t = mesh.triangles[looked[k]];
+            const Eigen::Vector3d centre = (mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3;
+            looked_cell[k] = cell_key(cell_containing(voxmap.index_of(centre)));
             const Eigen::Vector3d &a = normals[std::size_t(t[0])], &b = normals[std::size_t(t[1])], &c = normals[std::size_t(t[2])];
             if (a.isZero() || b.isZero() || c.isZero()) continue;
-            sharp[f] = std::min({a.dot(b), b.dot(c), c.dot(a)}) < cos_feature;
+            sharp[k] = std::min({a.dot(b), b.dot(c), c.dot(a)}) < cos_feature;
         }
     });
     std::unordered_set<std::uint64_t> candidate_cells;
-    for (std::size_t f = 0; f < nt; ++f)
-        if (sharp[f]) candidate_cells.insert(cell_key(cell_of(mesh.triangles[f])));
+    for (std::size_t k = 0; k < looked.size(); ++k)
+        if (sharp[k]) candidate_cells.insert(looked_cell[k]);
     // The input's sharp edges, where given: every cell they pass through holds a feature, even one where marching
     // cubes sees only one of the two faces (an edge that clips a cell's corner between its grid edges); there the
     // feature point is the middle of the edge's stretch inside the cell, or the corner where edges meet in it.
@@ -295,13 +314,18 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         }
     CoarseMarks candidate_blocks(voxmap);
     for (const std::uint64_t key : candidate_cells) candidate_blocks.mark(key_cell(key), key_cell(key));
-    std::map<std::uint64_t, std::vector<std::uint32_t>> cell_triangles; // ordered: the output does not depend on hashing
-    for (std::size_t f = 0; f < nt; ++f) {
-        const Index3 cell = cell_of(mesh.triangles[f]);
-        if (!candidate_blocks.any(cell, cell)) continue;
-        const std::uint64_t key = cell_key(cell);
-        if (candidate_cells.count(key)) cell_triangles[key].push_back(std::uint32_t(f));
+    // (cell, triangle) for the triangles in candidate cells, sorted: each cell's run in order of key, so that the
+    // output does not depend on hashing.
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> in_cells;
+    for (std::size_t k = 0; k < looked.size(); ++k) {
+        const std::uint64_t key = looked_cell[k];
+        if (candidate_blocks.any(key_cell(key), key_cell(key)) && candidate_cells.count(key)) in_cells.push_back({key, looked[k]});
     }
+    std::sort(in_cells.begin(), in_cells.end());
+    std::vector<std::size_t> run_start; // where each cell's run begins in in_cells, and its end
+    for (std::size_t i = 0; i < in_cells.size(); ++i)
+        if (i == 0 || in_cells[i].first != in_cells[i - 1].first) run_start.push_back(i);
+    run_start.push_back(in_cells.size());
 
     // Per candidate cell, per loop (triangles joined through vertices): where its tangent planes meet.
     struct Loop {
@@ -310,9 +334,14 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         Eigen::Vector3d point;
         int rank = 0;
     };
-    std::vector<Loop> features;
-    for (const auto& [key, faces] : cell_triangles) {
+    // Cells are independent: their loops in parallel, then in order of key.
+    std::vector<std::vector<Loop>> cell_loops(run_start.size() - 1);
+    tbb::parallel_for(std::size_t(0), cell_loops.size(), [&](std::size_t r) {
+        const std::uint64_t key = in_cells[run_start[r]].first;
         const Index3 cell = key_cell(key);
+        std::vector<std::uint32_t> faces;
+        for (std::size_t i = run_start[r]; i < run_start[r + 1]; ++i) faces.push_back(in_cells[i].second);
+        std::vector<Loop>& features = cell_loops[r];
         internal::DisjointSets joined_faces(faces.size());
         std::map<std::int32_t, std::size_t> owner;
         for (std::size_t i = 0; i < faces.size(); ++i)
@@ -322,13 +351,13 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             }
         std::map<std::size_t, std::vector<std::uint32_t>> loops;
         for (std::size_t i = 0; i < faces.size(); ++i) loops[joined_faces.find(i)].push_back(faces[i]);
-        for (auto& [r, loop] : loops) {
+        for (auto& [root, loop] : loops) {
             std::vector<Eigen::Vector3d> points, ns;
             std::set<std::int32_t> seen;
             bool usable = true;
             for (auto f : loop)
                 for (auto v : mesh.triangles[f])
-                    if (edges[std::size_t(v)].axis >= 0 && seen.insert(v).second) {
+                    if (on_grid_edge[std::size_t(v)] && seen.insert(v).second) {
                         usable &= !normals[std::size_t(v)].isZero();
                         points.push_back(mesh.vertices[std::size_t(v)]);
                         ns.push_back(normals[std::size_t(v)]);
@@ -349,7 +378,10 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                 l.point = along->second.point(), l.rank = 2;
             if (l.rank >= 2) features.push_back(std::move(l));
         }
-    }
+    });
+    std::vector<Loop> features;
+    for (auto& loops : cell_loops)
+        for (auto& l : loops) features.push_back(std::move(l));
     // A corner whose tip pokes into a cell no grid corner of which is inside lies outside every cell around it:
     // the loops around it that agree on it (rank 3, within a fifth of a voxel) become one patch, fanned to it.
     internal::DisjointSets group(features.size());
@@ -366,10 +398,20 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     std::map<std::size_t, std::vector<int>> patches;
     for (std::size_t i = 0; i < features.size(); ++i) patches[group.find(i)].push_back(int(i));
 
-    std::vector<std::uint8_t> removed(nt, 0);
-    std::vector<std::array<std::int32_t, 3>> added;
-    for (const auto& [r, members] : patches) {
-        std::vector<std::uint32_t> tris;
+    // Each patch's fan, independent of the others: in parallel, then applied in order.
+    struct Fan {
+        std::vector<std::uint32_t> triangles; // those it replaces
+        std::vector<std::int32_t> cycle;      // its boundary, empty when the patch is not one disk or the point strays
+        Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    };
+    std::vector<const std::vector<int>*> patch_list;
+    for (const auto& [r, members] : patches) patch_list.push_back(&members);
+    std::vector<Fan> fans(patch_list.size());
+    auto directed = [](std::int32_t a, std::int32_t b) { return std::uint64_t(std::uint32_t(a)) << 32 | std::uint32_t(b); };
+    tbb::parallel_for(std::size_t(0), fans.size(), [&](std::size_t p) {
+        const std::vector<int>& members = *patch_list[p];
+        Fan& fan = fans[p];
+        std::vector<std::uint32_t>& tris = fan.triangles;
         Eigen::Vector3d point = Eigen::Vector3d::Zero();
         Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
         for (int i : members) {
@@ -378,24 +420,33 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             point += l.point / double(members.size());
             for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], double(l.cell[std::size_t(a)])), hi[a] = std::max(hi[a], double(l.cell[std::size_t(a)]) + 1);
         }
-        // The patch's boundary: directed edges used once, chained into one cycle.
-        std::map<std::pair<std::int32_t, std::int32_t>, int> count;
+        // The patch's boundary: directed edges whose reverse it lacks, each used once and each leaving a different
+        // vertex, chained into one cycle from the lowest vertex.
+        std::vector<std::uint64_t> used;
         for (auto f : tris) {
             const auto& t = mesh.triangles[f];
-            for (int c = 0; c < 3; ++c) count[{t[std::size_t(c)], t[std::size_t((c + 1) % 3)]}]++;
+            for (int c = 0; c < 3; ++c) used.push_back(directed(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
         }
-        std::map<std::int32_t, std::int32_t> next;
-        bool simple = true;
-        for (const auto& [e, n] : count)
-            if (!count.count({e.second, e.first})) simple &= n == 1 && next.emplace(e.first, e.second).second;
-        if (!simple || next.size() < 3) continue;
-        std::vector<std::int32_t> cycle{next.begin()->first};
+        std::sort(used.begin(), used.end());
+        std::vector<std::pair<std::int32_t, std::int32_t>> next; // sorted by its first
+        for (std::size_t i = 0; i < used.size();) {
+            std::size_t j = i;
+            while (j < used.size() && used[j] == used[i]) ++j;
+            const auto a = std::int32_t(used[i] >> 32), b = std::int32_t(used[i] & 0xffffffffu);
+            if (!std::binary_search(used.begin(), used.end(), directed(b, a))) {
+                if (j - i != 1 || (!next.empty() && next.back().first == a)) return;
+                next.push_back({a, b});
+            }
+            i = j;
+        }
+        if (next.size() < 3) return;
+        std::vector<std::int32_t> cycle{next.front().first};
         while (cycle.size() <= next.size()) {
-            const auto it = next.find(cycle.back());
-            if (it == next.end() || it->second == cycle.front()) break;
+            const auto it = std::lower_bound(next.begin(), next.end(), std::pair(cycle.back(), std::numeric_limits<std::int32_t>::min()));
+            if (it == next.end() || it->first != cycle.back() || it->second == cycle.front()) break;
             cycle.push_back(it->second);
         }
-        if (cycle.size() != next.size()) continue; // not one disk
+        if (cycle.size() != next.size()) return; // not one disk
         // Where the point may go: its cells, or for a corner the cells next to them, where its tip may hide. An
         // edge's point, with the input's normals, may lie most of a voxel outside: where the edge clips a grid
         // face none of whose corners is inside, the two cells it joins share no triangle, and marching cubes
@@ -405,48 +456,66 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         const Loop& first = features[std::size_t(members[0])];
         const double slack = first.rank == 3 ? 1.0 : grid ? 0.8 : 0.05;
         const Eigen::Vector3d q = voxmap.index_of(point);
-        if (((q - lo).array() < -slack).any() || ((q - hi).array() > slack).any()) continue;
+        if (((q - lo).array() < -slack).any() || ((q - hi).array() > slack).any()) return;
+        fan.cycle = std::move(cycle);
+        fan.point = point;
+    });
+    std::vector<std::uint8_t> removed(nt, 0);
+    std::vector<std::array<std::int32_t, 3>> added;
+    for (const Fan& fan : fans) {
+        if (fan.cycle.empty()) continue;
         const auto centre_index = std::int32_t(mesh.vertices.size());
-        mesh.vertices.push_back(point);
-        for (auto f : tris) removed[f] = 1;
-        for (std::size_t i = 0; i < cycle.size(); ++i) added.push_back({centre_index, cycle[i], cycle[(i + 1) % cycle.size()]});
+        mesh.vertices.push_back(fan.point);
+        for (auto f : fan.triangles) removed[f] = 1;
+        for (std::size_t i = 0; i < fan.cycle.size(); ++i) added.push_back({centre_index, fan.cycle[i], fan.cycle[(i + 1) % fan.cycle.size()]});
     }
-    std::vector<std::array<std::int32_t, 3>> triangles;
-    triangles.reserve(nt + added.size());
-    for (std::size_t f = 0; f < nt; ++f)
-        if (!removed[f]) triangles.push_back(mesh.triangles[f]);
-    const std::size_t first_added = triangles.size();
-    triangles.insert(triangles.end(), added.begin(), added.end());
+    // The fans' triangles take the removed ones' places, then go after the rest: no copy of the whole mesh.
+    std::vector<std::array<std::int32_t, 3>> triangles = std::move(mesh.triangles);
+    std::vector<std::size_t> fan_triangles; // where each added triangle went
+    fan_triangles.reserve(added.size());
+    {
+        std::size_t free = 0;
+        for (const auto& t : added) {
+            while (free < nt && !removed[free]) ++free;
+            if (free < nt) triangles[free] = t, fan_triangles.push_back(free++);
+            else fan_triangles.push_back(triangles.size()), triangles.push_back(t);
+        }
+        // Removed places left over (the fans have fewer triangles than the loops they replace) lie after every
+        // fan triangle: close them up.
+        std::size_t kept = free;
+        for (std::size_t f = free; f < triangles.size(); ++f)
+            if (f >= nt || !removed[f]) triangles[kept++] = triangles[f];
+        triangles.resize(kept);
+    }
 
     // Flip the edge between two fans whose centres both are feature vertices: the two centres join, along the
     // sharp edge. Only where the centres are not joined yet and neither triangle turns over.
-    std::map<std::pair<std::int32_t, std::int32_t>, std::pair<std::size_t, std::size_t>> shared; // undirected edge -> (triangle, triangle)
-    for (std::size_t f = first_added; f < triangles.size(); ++f) {
+    auto undirected = [&](std::int32_t a, std::int32_t b) { return a < b ? directed(a, b) : directed(b, a); };
+    std::vector<std::pair<std::uint64_t, std::size_t>> outer; // (the fan's outer edge, triangle), sorted
+    for (const std::size_t f : fan_triangles) outer.push_back({undirected(triangles[f][1], triangles[f][2]), f});
+    std::sort(outer.begin(), outer.end());
+    std::unordered_set<std::uint64_t> joined;
+    joined.reserve(3 * added.size());
+    for (const std::size_t f : fan_triangles) {
         const auto& t = triangles[f];
-        const std::pair<std::int32_t, std::int32_t> e = std::minmax(t[1], t[2]); // the fan's outer edge
-        auto [it, inserted] = shared.try_emplace(e, f, std::size_t(-1));
-        if (!inserted) it->second.second = f;
-    }
-    std::set<std::pair<std::int32_t, std::int32_t>> joined;
-    for (std::size_t f = first_added; f < triangles.size(); ++f) {
-        const auto& t = triangles[f];
-        for (int c = 0; c < 3; ++c) joined.insert(std::minmax(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
+        for (int c = 0; c < 3; ++c) joined.insert(undirected(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
     }
     auto normal = [&](const std::array<std::int32_t, 3>& t) {
         return Eigen::Vector3d((mesh.vertices[std::size_t(t[1])] - mesh.vertices[std::size_t(t[0])]).cross(mesh.vertices[std::size_t(t[2])] - mesh.vertices[std::size_t(t[0])]));
     };
-    for (const auto& [e, pair] : shared) {
-        if (pair.second == std::size_t(-1)) continue;
-        auto &A = triangles[pair.first], &B = triangles[pair.second];
+    for (std::size_t i = 0, j = 0; i < outer.size(); i = j) {
+        while (j < outer.size() && outer[j].first == outer[i].first) ++j;
+        if (j - i < 2) continue;
+        auto &A = triangles[outer[i].second], &B = triangles[outer[j - 1].second];
         // A = (f, v, w), B = (g, w, v) with f, g the fans' centres.
         const std::int32_t f = A[0], g = B[0], v = A[1], w = A[2];
-        if (B[1] != w || B[2] != v || f == g || joined.count(std::minmax(f, g))) continue;
+        if (B[1] != w || B[2] != v || f == g || joined.count(undirected(f, g))) continue;
         const std::array<std::int32_t, 3> A2{f, v, g}, B2{f, g, w};
         const Eigen::Vector3d before = normal(A) + normal(B);
         if (normal(A2).dot(before) <= 0 || normal(B2).dot(before) <= 0) continue;
         if (normal(A2).dot(normal(B2)) <= -0.5 * normal(A2).norm() * normal(B2).norm()) continue; // folded
-        joined.erase(std::minmax(v, w));
-        joined.insert(std::minmax(f, g));
+        joined.erase(undirected(v, w));
+        joined.insert(undirected(f, g));
         A = A2, B = B2;
     }
     mesh.triangles = std::move(triangles);

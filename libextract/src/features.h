@@ -8,7 +8,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <unordered_map>
+#include <span>
+#include <tbb/parallel_for.h>
 #include <utility>
 #include <vector>
 
@@ -31,56 +32,32 @@ inline Index3 cell_containing(const Eigen::Vector3d& q) {
     return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
 }
 
-/// Ids hashed by the cells a box (index space) covers: the feature surface's triangles, the sharp edges.
-class CellBuckets {
-public:
-    void add(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::uint32_t id) {
-        const Index3 a = cell_containing(lo), b = cell_containing(hi);
-        for (std::int64_t z = a[2]; z <= b[2]; ++z)
-            for (std::int64_t y = a[1]; y <= b[1]; ++y)
-                for (std::int64_t x = a[0]; x <= b[0]; ++x) cells_[cell_key({x, y, z})].push_back(id);
-    }
-    /// The ids in the cell with this key, or none.
-    const std::vector<std::uint32_t>& at(std::uint64_t key) const {
-        static const std::vector<std::uint32_t> none;
-        const auto it = cells_.find(key);
-        return it == cells_.end() ? none : it->second;
-    }
+/// The indices in [0, n) for which `keep` holds, ascending: fixed blocks in parallel (the result does not depend on
+/// the thread count), then joined. For the passes that look for the few triangles or vertices near a feature.
+template <class Keep>
+std::vector<std::uint32_t> select_in_parallel(std::size_t n, const Keep& keep) {
+    constexpr std::size_t kBlock = std::size_t(1) << 14;
+    std::vector<std::vector<std::uint32_t>> parts((n + kBlock - 1) / kBlock);
+    tbb::parallel_for(std::size_t(0), parts.size(), [&](std::size_t b) {
+        for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
+            if (keep(i)) parts[b].push_back(std::uint32_t(i));
+    });
+    std::size_t total = 0;
+    for (const auto& p : parts) total += p.size();
+    std::vector<std::uint32_t> out;
+    out.reserve(total);
+    for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+    return out;
+}
 
-private:
-    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
-};
-
-/// Which 8^3 blocks of cells hold a marked cell: a byte per block over the voxmap and 8 cells around it, so that a
-/// cell or box with nothing marked in it is known without a hash lookup (the buckets above are hash maps, and a
-/// pass over every vertex or triangle spent most of its time asking them about empty cells).
-class CoarseMarks {
+/// The grid of 8^3-cell blocks over a voxmap and 8 cells around it: CoarseMarks and CellBuckets index by it.
+class BlockGrid {
 public:
-    explicit CoarseMarks(const SparseVoxmap& v) {
+    static constexpr std::int64_t kSide = 8, kCells = kSide * kSide * kSide;
+    explicit BlockGrid(const SparseVoxmap& v) {
         for (std::size_t a = 0; a < 3; ++a) dims_[a] = (v.dims()[a] + 2 * kMargin) / kSide + 1;
-        marks_.assign(std::size_t(dims_[0] * dims_[1] * dims_[2]), 0);
     }
-    /// Mark the cells in [lo, hi] (inclusive; those beyond the margin are never asked about).
-    void mark(const Index3& lo, const Index3& hi) {
-        Index3 a, b;
-        if (!range(lo, hi, a, b)) return;
-        for (std::int64_t z = a[2]; z <= b[2]; ++z)
-            for (std::int64_t y = a[1]; y <= b[1]; ++y)
-                for (std::int64_t x = a[0]; x <= b[0]; ++x) marks_[std::size_t(x + dims_[0] * (y + dims_[1] * z))] = 1;
-    }
-    /// False when no cell in [lo, hi] is marked (true may still mean none: blocks are coarse).
-    bool any(const Index3& lo, const Index3& hi) const {
-        Index3 a, b;
-        if (!range(lo, hi, a, b)) return false;
-        for (std::int64_t z = a[2]; z <= b[2]; ++z)
-            for (std::int64_t y = a[1]; y <= b[1]; ++y)
-                for (std::int64_t x = a[0]; x <= b[0]; ++x)
-                    if (marks_[std::size_t(x + dims_[0] * (y + dims_[1] * z))]) return true;
-        return false;
-    }
-
-private:
-    static constexpr std::int64_t kSide = 8, kMargin = 8;
+    std::size_t block_count() const { return std::size_t(dims_[0] * dims_[1] * dims_[2]); }
     /// The blocks holding cells [lo, hi], clipped to the grid; false when none is in it.
     bool range(const Index3& lo, const Index3& hi, Index3& a, Index3& b) const {
         for (std::size_t k = 0; k < 3; ++k) {
@@ -89,9 +66,112 @@ private:
         }
         return true;
     }
+    std::size_t block_index(std::int64_t x, std::int64_t y, std::int64_t z) const { return std::size_t(x + dims_[0] * (y + dims_[1] * z)); }
+    /// The block of a cell, or -1 when the cell lies outside the grid.
+    std::int64_t block_of(const Index3& c) const {
+        Index3 b;
+        for (std::size_t k = 0; k < 3; ++k) {
+            b[k] = block(c[k]);
+            if (b[k] < 0 || b[k] >= dims_[k]) return -1;
+        }
+        return std::int64_t(block_index(b[0], b[1], b[2]));
+    }
+    /// A cell's place in its block.
+    static std::size_t local(const Index3& c) {
+        return std::size_t(((c[0] + kMargin) & (kSide - 1)) + kSide * (((c[1] + kMargin) & (kSide - 1)) + kSide * ((c[2] + kMargin) & (kSide - 1))));
+    }
+
+private:
+    static constexpr std::int64_t kMargin = 8;
     static std::int64_t block(std::int64_t cell) { return cell + kMargin >= 0 ? (cell + kMargin) / kSide : -1; }
     Index3 dims_{};
+};
+
+/// Which 8^3 blocks of cells hold a marked cell, a byte per block, so that a cell or box with nothing marked in it
+/// is known without looking further (a pass over every vertex or triangle spent most of its time asking about
+/// empty cells).
+class CoarseMarks {
+public:
+    explicit CoarseMarks(const SparseVoxmap& v) : grid_(v), marks_(grid_.block_count(), 0) {}
+    /// Mark the cells in [lo, hi] (inclusive; those beyond the grid are never asked about).
+    void mark(const Index3& lo, const Index3& hi) {
+        Index3 a, b;
+        if (!grid_.range(lo, hi, a, b)) return;
+        for (std::int64_t z = a[2]; z <= b[2]; ++z)
+            for (std::int64_t y = a[1]; y <= b[1]; ++y)
+                for (std::int64_t x = a[0]; x <= b[0]; ++x) marks_[grid_.block_index(x, y, z)] = 1;
+    }
+    /// False when no cell in [lo, hi] is marked (true may still mean none: blocks are coarse).
+    bool any(const Index3& lo, const Index3& hi) const {
+        Index3 a, b;
+        if (!grid_.range(lo, hi, a, b)) return false;
+        for (std::int64_t z = a[2]; z <= b[2]; ++z)
+            for (std::int64_t y = a[1]; y <= b[1]; ++y)
+                for (std::int64_t x = a[0]; x <= b[0]; ++x)
+                    if (marks_[grid_.block_index(x, y, z)]) return true;
+        return false;
+    }
+
+private:
+    BlockGrid grid_;
     std::vector<std::uint8_t> marks_;
+};
+
+/// Ids filed by the cells their boxes cover (index space): the feature surface's triangles, the sharp edges. add()
+/// all, then build(); a cell's ids, in the order added, are then two array reads away. Block-sparse arrays, where
+/// a hash map of vectors took a fifth of the feature mesher's time to fill.
+class CellBuckets {
+public:
+    explicit CellBuckets(const SparseVoxmap& v) : grid_(v), marks_(v) {}
+    void add(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::uint32_t id) { items_.push_back({cell_containing(lo), cell_containing(hi), id}); }
+    void build() {
+        std::vector<std::int32_t> slot(grid_.block_count(), -1);
+        std::int32_t slots = 0;
+        auto for_cells = [&](const Item& item, auto&& f) {
+            for (std::int64_t z = item.lo[2]; z <= item.hi[2]; ++z)
+                for (std::int64_t y = item.lo[1]; y <= item.hi[1]; ++y)
+                    for (std::int64_t x = item.lo[0]; x <= item.hi[0]; ++x) {
+                        const Index3 c{x, y, z};
+                        const std::int64_t b = grid_.block_of(c);
+                        if (b >= 0) f(std::size_t(b), grid_.local(c));
+                    }
+        };
+        for (const Item& item : items_) {
+            for_cells(item, [&](std::size_t b, std::size_t) {
+                if (slot[b] < 0) slot[b] = slots++;
+            });
+            marks_.mark(item.lo, item.hi);
+        }
+        offsets_.assign(std::size_t(slots) * BlockGrid::kCells + 1, 0);
+        for (const Item& item : items_) for_cells(item, [&](std::size_t b, std::size_t l) { ++offsets_[std::size_t(slot[b]) * BlockGrid::kCells + l + 1]; });
+        for (std::size_t i = 1; i < offsets_.size(); ++i) offsets_[i] += offsets_[i - 1];
+        ids_.resize(offsets_.back());
+        std::vector<std::uint32_t> cursor(offsets_.begin(), offsets_.end() - 1);
+        for (const Item& item : items_) for_cells(item, [&](std::size_t b, std::size_t l) { ids_[cursor[std::size_t(slot[b]) * BlockGrid::kCells + l]++] = item.id; });
+        slot_ = std::move(slot);
+        items_ = {};
+    }
+    /// The ids in cell `c`, in the order added (none before build()).
+    std::span<const std::uint32_t> at(const Index3& c) const {
+        const std::int64_t b = grid_.block_of(c);
+        if (b < 0 || slot_.empty() || slot_[std::size_t(b)] < 0) return {};
+        const std::size_t i = std::size_t(slot_[std::size_t(b)]) * BlockGrid::kCells + BlockGrid::local(c);
+        return {ids_.data() + offsets_[i], ids_.data() + offsets_[i + 1]};
+    }
+    /// False when no cell in [lo, hi] holds an id (true may still mean none: blocks are coarse).
+    bool any(const Index3& lo, const Index3& hi) const { return marks_.any(lo, hi); }
+
+private:
+    struct Item {
+        Index3 lo, hi;
+        std::uint32_t id;
+    };
+    BlockGrid grid_;
+    CoarseMarks marks_;
+    std::vector<Item> items_;
+    std::vector<std::int32_t> slot_;       ///< per block: its place in offsets_, or -1 when empty
+    std::vector<std::uint32_t> offsets_;   ///< per cell of each filled block: where its ids begin in ids_
+    std::vector<std::uint32_t> ids_;
 };
 
 /// `mesh`, marching cubes' output for `voxmap` (every vertex on a grid edge, every triangle in one cell), with

@@ -89,16 +89,21 @@ FeatureSurface sharp_feature_surface(const TriangleMesh& mesh, double voxel_size
         const int n = std::clamp(int(std::ceil(longest / voxel_size)), 1, 4096);
         auto at = [&](int i, int j) { return Eigen::Vector3d(a + (b - a) * (double(i) / n) + (c - a) * (double(j) / n)); };
         TriangleMesh& m = per_face[f];
-        auto emit = [&](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
-            if (!near_sharp((p + q + r) / 3)) return;
-            const auto base = std::int32_t(m.vertices.size());
-            m.vertices.insert(m.vertices.end(), {p, q, r});
-            m.triangles.push_back({base, base + 1, base + 2});
+        // The pieces share their corners (a warp carries each point once, not once per piece around it).
+        std::vector<std::int32_t> index(std::size_t(n + 1) * std::size_t(n + 2) / 2, -1);
+        auto vertex = [&](int i, int j) {
+            std::int32_t& v = index[std::size_t(j) * std::size_t(2 * n + 3 - j) / 2 + std::size_t(i)]; // row j holds n + 1 - j points
+            if (v < 0) v = std::int32_t(m.vertices.size()), m.vertices.push_back(at(i, j));
+            return v;
+        };
+        auto emit = [&](std::array<int, 2> p, std::array<int, 2> q, std::array<int, 2> r) {
+            if (!near_sharp((at(p[0], p[1]) + at(q[0], q[1]) + at(r[0], r[1])) / 3)) return;
+            m.triangles.push_back({vertex(p[0], p[1]), vertex(q[0], q[1]), vertex(r[0], r[1])});
         };
         for (int i = 0; i < n; ++i)
             for (int j = 0; i + j < n; ++j) {
-                emit(at(i, j), at(i + 1, j), at(i, j + 1));
-                if (i + j + 1 < n) emit(at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                emit({i, j}, {i + 1, j}, {i, j + 1});
+                if (i + j + 1 < n) emit({i + 1, j}, {i + 1, j + 1}, {i, j + 1});
             }
     });
     for (auto& m : per_face) {
