@@ -183,4 +183,57 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     }
 }
 
+void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals) {
+    auto known = [&](std::int32_t v) { return std::size_t(v) < normals.size() && !normals[std::size_t(v)].isZero(); };
+    auto reference = [&](std::initializer_list<std::int32_t> corners) {
+        Eigen::Vector3d m = Eigen::Vector3d::Zero();
+        for (auto v : corners)
+            if (known(v)) m += normals[std::size_t(v)];
+        return m;
+    };
+    auto folded = [&](const Triangle& t) {
+        const Eigen::Vector3d m = reference({t[0], t[1], t[2]});
+        return !m.isZero() && !(area_normal(vertices, t).dot(m) > 0);
+    };
+    const std::vector<std::uint32_t> bad = select_in_parallel(triangles.size(), [&](std::size_t i) { return folded(triangles[i]); });
+    if (bad.empty()) return;
+    // Directed edges of the triangles around the folded ones.
+    std::vector<std::uint8_t> near(vertices.size(), 0);
+    for (const auto f : bad)
+        for (const auto v : triangles[f]) near[std::size_t(v)] = 1;
+    std::unordered_map<std::uint64_t, std::uint32_t> holder;
+    auto enter = [&](std::uint32_t i) {
+        const Triangle& t = triangles[i];
+        for (int c = 0; c < 3; ++c) holder[directed(t[std::size_t(c)], t[std::size_t((c + 1) % 3)])] = i;
+    };
+    for (const std::uint32_t i : select_in_parallel(triangles.size(), [&](std::size_t i) {
+             const Triangle& t = triangles[i];
+             return (near[std::size_t(t[0])] | near[std::size_t(t[1])] | near[std::size_t(t[2])]) != 0;
+         }))
+        enter(i);
+    for (const std::uint32_t f : bad) {
+        for (int c = 0; c < 3 && folded(triangles[f]); ++c) {
+            const Triangle T = triangles[f];
+            const std::int32_t a = T[std::size_t(c)], b = T[std::size_t((c + 1) % 3)], cc = T[std::size_t((c + 2) % 3)];
+            const auto it = holder.find(directed(b, a));
+            if (it == holder.end()) continue;
+            const std::uint32_t u = it->second;
+            const Triangle U = triangles[u];
+            std::int32_t d = -1;
+            for (auto v : U)
+                if (v != a && v != b) d = v;
+            if (d < 0 || d == cc || holder.count(directed(cc, d)) || holder.count(directed(d, cc))) continue;
+            const Triangle T2{cc, a, d}, U2{d, b, cc};
+            Eigen::Vector3d m = reference({a, b, cc, d});
+            if (m.isZero()) continue;
+            if (!(area_normal(vertices, T2).dot(m) > 0 && area_normal(vertices, U2).dot(m) > 0)) continue;
+            if (folded(T2) || folded(U2)) continue;
+            for (const auto& t : {T, U})
+                for (int k = 0; k < 3; ++k) holder.erase(directed(t[std::size_t(k)], t[std::size_t((k + 1) % 3)]));
+            triangles[f] = T2, triangles[u] = U2;
+            enter(f), enter(u);
+        }
+    }
+}
+
 } // namespace voxwarp::extract_internal

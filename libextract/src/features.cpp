@@ -520,6 +520,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     }
     mesh.triangles = std::move(triangles);
     if (options.feature_surface) split_across_sharp_edges(mesh.vertices, mesh.triangles, normals, cos_feature, options.feature_surface->edges, voxmap);
+    unfold(mesh.vertices, mesh.triangles, normals);
     return mesh;
 }
 

@@ -185,4 +185,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
 void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals,
                               double cos_feature, const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& voxmap);
 
+/// The last pass: a triangle that faces against its corners' `normals` (folded in the plane of a face) has the
+/// edge it shares with a neighbour flipped, where the two new triangles face the right way. The mesh stays a
+/// closed 2-manifold.
+void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals);
+
 } // namespace voxwarp::extract_internal
