@@ -348,6 +348,21 @@ TEST(Deform, TheFeatureMesherFoldsFewTrianglesOnTheBentAndTwistedBox) {
     EXPECT_LE(total, 28u);
 }
 
+TEST(Deform, AReportPassedInAgainHoldsOnlyTheLastRunsEdits) {
+    // A second deform into the same report explained its misses against the first run's edits as well, reading past
+    // the script's (AddressSanitizer: heap-buffer-overflow in explain_misses).
+    const TriangleMesh box = read_mesh(test::data_path("box.obj"));
+    const EditScript script = read_edit_file(test::data_path("box_bend.json"));
+    DeformOptions options;
+    options.voxelize.resolution = 32;
+    DeformReport report;
+    deform_mesh(box, script, options, report);
+    deform_mesh(box, script, options, report);
+    EXPECT_EQ(report.edits.size(), script.edits.size());
+    deform_vertices(box, script, options, report);
+    EXPECT_EQ(report.edits.size(), script.edits.size());
+}
+
 /// Two meshes in one (their vertices renumbered).
 TriangleMesh joined(TriangleMesh a, const TriangleMesh& b) {
     const auto offset = std::int32_t(a.vertices.size());

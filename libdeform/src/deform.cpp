@@ -379,6 +379,10 @@ void measure_targets(EditReport& er, const std::vector<Constraint>& constraints,
 SparseVoxmap run_edits(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report, const TriangleMesh* model,
                        FeatureSurface* features = nullptr, SurfaceProbe* probe = nullptr, std::vector<WarpStep>* steps = nullptr) {
     Progress progress(options.progress, "deform");
+    // This run's edits only: a report passed in again (a second deform into one report) held the last run's, and
+    // explaining misses read past this script's edits.
+    report.edits.clear();
+    report.seconds_solve = report.seconds_warp = 0;
     report.voxel_size = voxmap.voxel_size();
     report.dims = voxmap.dims();
     report.volume_before = enclosed_volume(voxmap);
@@ -591,6 +595,8 @@ void push_corner_normals(TriangleMesh& mesh, const std::vector<WarpStep>& step) 
 TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     TriangleMesh out = mesh;
     report.mode = "vertex";
+    report.edits.clear(); // this run's edits only, as run_edits
+    report.seconds_solve = 0;
     for (std::size_t e = 0; e < script.edits.size(); ++e) {
         const Edit& edit = script.edits[e];
         const auto& constraints = edit.constraints;
