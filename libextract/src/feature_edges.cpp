@@ -96,6 +96,55 @@ Eigen::Vector3d area_normal(const std::vector<Eigen::Vector3d>& v, const Triangl
     return (v[std::size_t(t[1])] - v[std::size_t(t[0])]).cross(v[std::size_t(t[2])] - v[std::size_t(t[0])]);
 }
 
+/// Whether vertex `v` has a normal: `normals` holds one per vertex of marching cubes' output, zero where unknown.
+bool known(const std::vector<Eigen::Vector3d>& normals, std::int32_t v) { return std::size_t(v) < normals.size() && !normals[std::size_t(v)].isZero(); }
+
+/// The corner of `t` that is neither `a` nor `b`.
+std::int32_t third(const Triangle& t, std::int32_t a, std::int32_t b) {
+    for (auto v : t)
+        if (v != a && v != b) return v;
+    return -1;
+}
+
+/// Which triangle holds each directed edge, among the triangles with a corner marked in `near` (by vertex; those
+/// past its end unmarked), and with `both_ends` only the edges whose two ends are marked. A triangle about to
+/// change is left, and entered again once changed.
+class EdgeHolders {
+public:
+    EdgeHolders(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& near, bool both_ends)
+        : triangles_(triangles), near_(near), both_ends_(both_ends) {
+        const std::vector<std::uint32_t> around = select_in_parallel(triangles.size(), [&](std::size_t i) {
+            const Triangle& t = triangles[i];
+            return (near[std::size_t(t[0])] | near[std::size_t(t[1])] | near[std::size_t(t[2])]) != 0;
+        });
+        holder_.reserve(3 * around.size());
+        for (const std::uint32_t i : around) enter(i);
+    }
+    void enter(std::uint32_t i) {
+        const Triangle& t = triangles_[i];
+        for (int c = 0; c < 3; ++c) {
+            const std::int32_t a = t[std::size_t(c)], b = t[std::size_t((c + 1) % 3)];
+            if (!both_ends_ || (marked(a) && marked(b))) holder_[directed(a, b)] = i;
+        }
+    }
+    void leave(std::uint32_t i) {
+        const Triangle& t = triangles_[i];
+        for (int c = 0; c < 3; ++c) holder_.erase(directed(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
+    }
+    /// The triangle holding a -> b, or -1 when none is known.
+    std::int64_t of(std::int32_t a, std::int32_t b) const {
+        const auto it = holder_.find(directed(a, b));
+        return it == holder_.end() ? -1 : std::int64_t(it->second);
+    }
+
+private:
+    bool marked(std::int32_t v) const { return std::size_t(v) < near_.size() && near_[std::size_t(v)]; }
+    const std::vector<Triangle>& triangles_;
+    const std::vector<std::uint8_t>& near_;
+    bool both_ends_;
+    std::unordered_map<std::uint64_t, std::uint32_t> holder_;
+};
+
 } // namespace
 
 void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals,
@@ -111,16 +160,15 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
         std::int32_t a, b;
         Eigen::Vector3d point, along; // the sharp edge's point and direction
     };
-    auto known = [&](std::int32_t v) { return std::size_t(v) < normals.size() && !normals[std::size_t(v)].isZero(); };
     tbb::enumerable_thread_specific<std::vector<Split>> found;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, triangles.size(), 4096), [&](const auto& range) {
         auto& local = found.local();
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
             // A triangle none of whose corners has a normal is far from the feature surface, and so from its edges.
-            if (!known(triangles[i][0]) && !known(triangles[i][1]) && !known(triangles[i][2])) continue;
+            if (!known(normals, triangles[i][0]) && !known(normals, triangles[i][1]) && !known(normals, triangles[i][2])) continue;
             for (int c = 0; c < 3; ++c) {
                 const std::int32_t a = triangles[i][std::size_t(c)], b = triangles[i][std::size_t((c + 1) % 3)];
-                if (a > b || (known(a) && known(b) && normals[std::size_t(a)].dot(normals[std::size_t(b)]) >= cos_feature)) continue;
+                if (a > b || (known(normals, a) && known(normals, b) && normals[std::size_t(a)].dot(normals[std::size_t(b)]) >= cos_feature)) continue;
                 Eigen::Vector3d point = Eigen::Vector3d::Zero(), along = Eigen::Vector3d::Zero();
                 if (grid.nearest(vertices[std::size_t(a)], vertices[std::size_t(b)], 0.02 * h, point, along)) local.push_back({a, b, point, along});
             }
@@ -131,34 +179,14 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     if (splits.empty()) return;
     std::sort(splits.begin(), splits.end(), [](const Split& x, const Split& y) { return std::pair(x.a, x.b) < std::pair(y.a, y.b); });
 
-    // Directed edges of the triangles around the edges to split.
+    // Directed edges of the triangles around the edges to split; only those between touched vertices are asked about.
     std::vector<std::uint8_t> touched(vertices.size(), 0);
     for (const auto& s : splits) touched[std::size_t(s.a)] = touched[std::size_t(s.b)] = 1;
-    std::unordered_map<std::uint64_t, std::uint32_t> holder;
-    // Only edges between touched vertices can be asked about.
-    auto is_touched = [&](std::int32_t v) { return std::size_t(v) < touched.size() && touched[std::size_t(v)]; };
-    holder.reserve(4 * splits.size());
-    auto enter = [&](std::uint32_t i) {
-        const Triangle& t = triangles[i];
-        for (int c = 0; c < 3; ++c) {
-            const std::int32_t a = t[std::size_t(c)], b = t[std::size_t((c + 1) % 3)];
-            if (is_touched(a) && is_touched(b)) holder[directed(a, b)] = i;
-        }
-    };
-    for (const std::uint32_t i : select_in_parallel(triangles.size(), [&](std::size_t i) {
-             const Triangle& t = triangles[i];
-             return (touched[std::size_t(t[0])] | touched[std::size_t(t[1])] | touched[std::size_t(t[2])]) != 0;
-         }))
-        enter(i);
-    auto third = [](const Triangle& t, std::int32_t a, std::int32_t b) {
-        for (auto v : t)
-            if (v != a && v != b) return v;
-        return std::int32_t(-1);
-    };
+    EdgeHolders holders(triangles, touched, true);
     for (const auto& [a, b, point, along] : splits) {
-        const auto ab = holder.find(directed(a, b)), ba = holder.find(directed(b, a));
-        if (ab == holder.end() || ba == holder.end()) continue;
-        const std::uint32_t t1 = ab->second, t2 = ba->second;
+        const std::int64_t ab = holders.of(a, b), ba = holders.of(b, a);
+        if (ab < 0 || ba < 0) continue;
+        const auto t1 = std::uint32_t(ab), t2 = std::uint32_t(ba);
         const std::int32_t c = third(triangles[t1], a, b), d = third(triangles[t2], a, b);
         const Eigen::Vector3d n1 = area_normal(vertices, triangles[t1]), n2 = area_normal(vertices, triangles[t2]);
         // Seen from outside, a and b lie on either side of the sharp edge; an end on the edge's line is on neither
@@ -176,19 +204,18 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
             vertices.pop_back();
             continue;
         }
-        holder.erase(directed(a, b)), holder.erase(directed(b, a));
+        holders.leave(t1), holders.leave(t2);
         triangles[t1] = made[0], triangles[t2] = made[2];
         triangles.push_back(made[1]), triangles.push_back(made[3]);
-        for (auto t : {t1, t2, std::uint32_t(triangles.size() - 2), std::uint32_t(triangles.size() - 1)}) enter(t);
+        for (auto t : {t1, t2, std::uint32_t(triangles.size() - 2), std::uint32_t(triangles.size() - 1)}) holders.enter(t);
     }
 }
 
 void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals) {
-    auto known = [&](std::int32_t v) { return std::size_t(v) < normals.size() && !normals[std::size_t(v)].isZero(); };
     auto reference = [&](std::initializer_list<std::int32_t> corners) {
         Eigen::Vector3d m = Eigen::Vector3d::Zero();
         for (auto v : corners)
-            if (known(v)) m += normals[std::size_t(v)];
+            if (known(normals, v)) m += normals[std::size_t(v)];
         return m;
     };
     auto folded = [&](const Triangle& t) {
@@ -201,37 +228,25 @@ void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array
     std::vector<std::uint8_t> near(vertices.size(), 0);
     for (const auto f : bad)
         for (const auto v : triangles[f]) near[std::size_t(v)] = 1;
-    std::unordered_map<std::uint64_t, std::uint32_t> holder;
-    auto enter = [&](std::uint32_t i) {
-        const Triangle& t = triangles[i];
-        for (int c = 0; c < 3; ++c) holder[directed(t[std::size_t(c)], t[std::size_t((c + 1) % 3)])] = i;
-    };
-    for (const std::uint32_t i : select_in_parallel(triangles.size(), [&](std::size_t i) {
-             const Triangle& t = triangles[i];
-             return (near[std::size_t(t[0])] | near[std::size_t(t[1])] | near[std::size_t(t[2])]) != 0;
-         }))
-        enter(i);
+    EdgeHolders holders(triangles, near, false);
     for (const std::uint32_t f : bad) {
         for (int c = 0; c < 3 && folded(triangles[f]); ++c) {
             const Triangle T = triangles[f];
             const std::int32_t a = T[std::size_t(c)], b = T[std::size_t((c + 1) % 3)], cc = T[std::size_t((c + 2) % 3)];
-            const auto it = holder.find(directed(b, a));
-            if (it == holder.end()) continue;
-            const std::uint32_t u = it->second;
+            const std::int64_t held = holders.of(b, a);
+            if (held < 0) continue;
+            const auto u = std::uint32_t(held);
             const Triangle U = triangles[u];
-            std::int32_t d = -1;
-            for (auto v : U)
-                if (v != a && v != b) d = v;
-            if (d < 0 || d == cc || holder.count(directed(cc, d)) || holder.count(directed(d, cc))) continue;
+            const std::int32_t d = third(U, a, b);
+            if (d < 0 || d == cc || holders.of(cc, d) >= 0 || holders.of(d, cc) >= 0) continue;
             const Triangle T2{cc, a, d}, U2{d, b, cc};
             Eigen::Vector3d m = reference({a, b, cc, d});
             if (m.isZero()) continue;
             if (!(area_normal(vertices, T2).dot(m) > 0 && area_normal(vertices, U2).dot(m) > 0)) continue;
             if (folded(T2) || folded(U2)) continue;
-            for (const auto& t : {T, U})
-                for (int k = 0; k < 3; ++k) holder.erase(directed(t[std::size_t(k)], t[std::size_t((k + 1) % 3)]));
+            holders.leave(f), holders.leave(u);
             triangles[f] = T2, triangles[u] = U2;
-            enter(f), enter(u);
+            holders.enter(f), holders.enter(u);
         }
     }
 }

@@ -58,13 +58,20 @@ public:
         for (std::size_t a = 0; a < 3; ++a) dims_[a] = (v.dims()[a] + 2 * kMargin) / kSide + 1;
     }
     std::size_t block_count() const { return std::size_t(dims_[0] * dims_[1] * dims_[2]); }
-    /// The blocks holding cells [lo, hi], clipped to the grid; false when none is in it.
-    bool range(const Index3& lo, const Index3& hi, Index3& a, Index3& b) const {
+    /// Calls `f` with the index of each block holding a cell in [lo, hi] (within the grid), in order, until it
+    /// returns true; whether it did.
+    template <class F>
+    bool visit_blocks(const Index3& lo, const Index3& hi, const F& f) const {
+        Index3 a, b;
         for (std::size_t k = 0; k < 3; ++k) {
             a[k] = std::max<std::int64_t>(0, block(lo[k])), b[k] = std::min(dims_[k] - 1, block(hi[k]));
             if (a[k] > b[k]) return false;
         }
-        return true;
+        for (std::int64_t z = a[2]; z <= b[2]; ++z)
+            for (std::int64_t y = a[1]; y <= b[1]; ++y)
+                for (std::int64_t x = a[0]; x <= b[0]; ++x)
+                    if (f(block_index(x, y, z))) return true;
+        return false;
     }
     std::size_t block_index(std::int64_t x, std::int64_t y, std::int64_t z) const { return std::size_t(x + dims_[0] * (y + dims_[1] * z)); }
     /// The block of a cell, or -1 when the cell lies outside the grid.
@@ -95,21 +102,14 @@ public:
     explicit CoarseMarks(const SparseVoxmap& v) : grid_(v), marks_(grid_.block_count(), 0) {}
     /// Mark the cells in [lo, hi] (inclusive; those beyond the grid are never asked about).
     void mark(const Index3& lo, const Index3& hi) {
-        Index3 a, b;
-        if (!grid_.range(lo, hi, a, b)) return;
-        for (std::int64_t z = a[2]; z <= b[2]; ++z)
-            for (std::int64_t y = a[1]; y <= b[1]; ++y)
-                for (std::int64_t x = a[0]; x <= b[0]; ++x) marks_[grid_.block_index(x, y, z)] = 1;
+        grid_.visit_blocks(lo, hi, [&](std::size_t b) {
+            marks_[b] = 1;
+            return false;
+        });
     }
     /// False when no cell in [lo, hi] is marked (true may still mean none: blocks are coarse).
     bool any(const Index3& lo, const Index3& hi) const {
-        Index3 a, b;
-        if (!grid_.range(lo, hi, a, b)) return false;
-        for (std::int64_t z = a[2]; z <= b[2]; ++z)
-            for (std::int64_t y = a[1]; y <= b[1]; ++y)
-                for (std::int64_t x = a[0]; x <= b[0]; ++x)
-                    if (marks_[grid_.block_index(x, y, z)]) return true;
-        return false;
+        return grid_.visit_blocks(lo, hi, [&](std::size_t b) { return marks_[b] != 0; });
     }
 
 private:
@@ -122,7 +122,7 @@ private:
 /// a hash map of vectors took a fifth of the feature mesher's time to fill.
 class CellBuckets {
 public:
-    explicit CellBuckets(const SparseVoxmap& v) : grid_(v), marks_(v) {}
+    explicit CellBuckets(const SparseVoxmap& v) : grid_(v) {}
     void add(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::uint32_t id) { items_.push_back({cell_containing(lo), cell_containing(hi), id}); }
     void build() {
         std::vector<std::int32_t> slot(grid_.block_count(), -1);
@@ -136,12 +136,10 @@ public:
                         if (b >= 0) f(std::size_t(b), grid_.local(c));
                     }
         };
-        for (const Item& item : items_) {
+        for (const Item& item : items_)
             for_cells(item, [&](std::size_t b, std::size_t) {
                 if (slot[b] < 0) slot[b] = slots++;
             });
-            marks_.mark(item.lo, item.hi);
-        }
         offsets_.assign(std::size_t(slots) * BlockGrid::kCells + 1, 0);
         for (const Item& item : items_) for_cells(item, [&](std::size_t b, std::size_t l) { ++offsets_[std::size_t(slot[b]) * BlockGrid::kCells + l + 1]; });
         for (std::size_t i = 1; i < offsets_.size(); ++i) offsets_[i] += offsets_[i - 1];
@@ -159,7 +157,9 @@ public:
         return {ids_.data() + offsets_[i], ids_.data() + offsets_[i + 1]};
     }
     /// False when no cell in [lo, hi] holds an id (true may still mean none: blocks are coarse).
-    bool any(const Index3& lo, const Index3& hi) const { return marks_.any(lo, hi); }
+    bool any(const Index3& lo, const Index3& hi) const {
+        return !slot_.empty() && grid_.visit_blocks(lo, hi, [&](std::size_t b) { return slot_[b] >= 0; });
+    }
 
 private:
     struct Item {
@@ -167,9 +167,8 @@ private:
         std::uint32_t id;
     };
     BlockGrid grid_;
-    CoarseMarks marks_;
     std::vector<Item> items_;
-    std::vector<std::int32_t> slot_;       ///< per block: its place in offsets_, or -1 when empty
+    std::vector<std::int32_t> slot_;       ///< per block: its place in offsets_, or -1 when no cell of it holds an id
     std::vector<std::uint32_t> offsets_;   ///< per cell of each filled block: where its ids begin in ids_
     std::vector<std::uint32_t> ids_;
 };

@@ -245,7 +245,7 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
     }
     TriangleMesh mesh;
     // Room for the feature mesher's fan centres, split points and their triangles (a few percent), so that adding
-    // them copies nothing: capacity never written is never touched, and costs no memory.
+    // them copies nothing (capacity never written is address space; its pages are never touched).
     mesh.vertices.reserve(std::size_t(vertices + vertices / 8));
     mesh.triangles.reserve(std::size_t(triangles + triangles / 8));
     mesh.vertices.resize(std::size_t(vertices));
