@@ -4,6 +4,8 @@
 #include <voxwarp/resources.h>
 #include <voxwarp/warp.h>
 
+#include "resolve.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -128,3 +130,20 @@ void push_feature_surface(const Lattice& rest, const Lattice& moved, FeatureSurf
 }
 
 } // namespace voxwarp
+
+namespace voxwarp::warp_internal {
+
+bool source_inside(const WarpDomain& domain, const Lattice& lattice, const std::array<std::int64_t, 3>& cell) {
+    const Eigen::Vector3d world = domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(cell[0]), double(cell[1]), double(cell[2]));
+    Eigen::Vector3d stu;
+    try {
+        stu = lattice.parameter_of(world);
+    } catch (const SolverFailure&) {
+        return true;
+    }
+    std::array<std::int64_t, 3> at;
+    for (std::size_t a = 0; a < 3; ++a) at[a] = std::int64_t(std::floor(stu[int(a)] * domain.granularity[a] + 0.5));
+    return domain.density(at[0], at[1], at[2]) >= 0.5f;
+}
+
+} // namespace voxwarp::warp_internal

@@ -111,6 +111,17 @@ Voxmap warp_reference(const WarpDomain& domain, const Lattice& lattice) {
         sides[std::size_t(out.index(i, j, k))] |= c.inside ? 1 : 2;
     }
     for (std::size_t t = 0; t < sides.size(); ++t) out.density[t] = warp_internal::carried_density(out.density[t], sides[t] & 1, sides[t] & 2);
+    auto at = [&](std::int64_t x, std::int64_t y, std::int64_t z) -> float* {
+        const std::int64_t i = x - first[0], j = y - first[1], k = z - first[2];
+        if (i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2]) return nullptr;
+        return &out.density[std::size_t(out.index(i, j, k))];
+    };
+    for (const auto& c : warp_internal::bridges(carried, [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+             const float* d = at(x, y, z);
+             return d && *d >= 0.5f;
+         },
+         [&](const std::array<std::int64_t, 3>& cell) { return warp_internal::source_inside(domain, lattice, cell); }))
+        if (float* d = at(c[0], c[1], c[2])) *d = warp_internal::kCarriedOutside;
     return out;
 }
 

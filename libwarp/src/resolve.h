@@ -41,7 +41,16 @@
 #include <tuple>
 #include <vector>
 
+namespace voxwarp {
+struct WarpDomain;
+class Lattice;
+} // namespace voxwarp
+
 namespace voxwarp::warp_internal {
+
+/// Whether target cell `cell` (target index space) pulls back through `lattice` into an inside voxel of the
+/// domain (density >= 0.5 at the nearest domain voxel of its preimage). Where the inverse is not found, inside.
+bool source_inside(const WarpDomain& domain, const Lattice& lattice, const std::array<std::int64_t, 3>& cell);
 
 /// Density of a target voxel with weight `w` and weighted value `v` (any units): the covered part's mean.
 /// `inside` carries the side along a row: read for an untouched voxel, updated by a touched one.
@@ -189,11 +198,115 @@ inline std::vector<Carry> link_carries(std::vector<CarryImage>& images, std::vec
 /// A resolved density `d` after the carries on its cell: put back on the side thin voxels carry it to. Where both
 /// sides carry it (a thin wall beside a thin gap, the wall's image box reaching into the gap's), the inside
 /// wins: the box is what keeps a turned wall closed, and letting the gap's voxels take it back punched holes in
-/// walls (Euler characteristic -40 against the input's -4 on the snowden bust, against -8 this way).
+/// walls (Euler characteristic -40 against the input's -4 on the snowden bust, against -8 this way). The few
+/// such cells that then bridge the gap are given back to it afterwards (bridges).
 inline float carried_density(float d, bool carried_inside, bool carried_outside) {
     if (carried_inside) return d < 0.5f ? kCarriedInside : d;
     if (carried_outside && d >= 0.5f) return kCarriedOutside;
     return d;
+}
+
+/// How far (voxels, each way) bridges looks for another way between a cell's inside neighbours.
+constexpr std::int64_t kBridgeReach = 32;
+
+/// Parts of one side around a cell, in its 3 x 3 x 3 neighbourhood `n` ([z][y][x], true inside; the centre left
+/// out): for the inside, cells of its 18 neighbours joined across faces, counted where they hold one of its face
+/// neighbours; for the outside, cells of its 26 neighbours joined across faces and edges, counted where they hold
+/// one of its 18 neighbours (extract's connectivity: inside across faces, outside across faces and edges).
+inline int local_parts(const bool (&n)[3][3][3], bool inside) {
+    auto norm1 = [](int q) { return std::abs(q % 3 - 1) + std::abs(q / 3 % 3 - 1) + std::abs(q / 9 - 1); };
+    auto member = [&](int q) { return q != 13 && n[q / 9][q / 3 % 3][q % 3] == inside && (!inside || norm1(q) <= 2); };
+    int label[27] = {};
+    int parts = 0;
+    for (int q = 0; q < 27; ++q) {
+        if (!member(q) || label[q] || norm1(q) > (inside ? 1 : 2)) continue;
+        int stack[27], top = 0;
+        stack[top++] = q, label[q] = 1;
+        ++parts;
+        while (top) {
+            const int p = stack[--top];
+            for (int r = 0; r < 27; ++r) {
+                if (label[r] || !member(r)) continue;
+                const int dx = std::abs(p % 3 - r % 3), dy = std::abs(p / 3 % 3 - r / 3 % 3), dz = std::abs(p / 9 - r / 9);
+                if (dx + dy + dz <= (inside ? 1 : 2) && dx <= 1 && dy <= 1 && dz <= 1) label[r] = 1, stack[top++] = r;
+            }
+        }
+    }
+    return parts;
+}
+
+/// The cells carried to both sides that bridge a gap, to be put outside (kCarriedOutside). carried_density gives
+/// such a cell to the wall; where a wall's image box reaches across a gap one voxel wide to the next wall (the
+/// snowden bust's glasses against its face, turned by the nose edit) the cell joins the two: a handle the input
+/// does not have (Euler characteristic -8 against the round trip's -4 at 128, -4 against -2 at 192). A cell
+/// bridges when, with it inside:
+/// - its inside neighbours are apart around it and its outside ones are one part (local_parts): it joins two
+///   things across a gap, where a wall's cell (outside on two sides) or a corner of one part (one inside part)
+///   does not;
+/// - its inside face neighbours are joined without it within kBridgeReach voxels, so it closes a loop. A cell
+///   whose neighbours join only through it is kept: giving it up would cut a wall in two (a scan at 64 lost a
+///   piece that way);
+/// - its centre pulls back to an outside voxel of the input (`source_inside` false): the gap's, not the wall's.
+/// Cells are taken in carry_less order, each judged with the ones before it as decided: the result does not
+/// depend on threads, and an incremental update that judges them all again agrees with the full warp.
+/// `carries`: sorted by carry_less (link_carries); `resolved_inside(x, y, z)`: whether target cell (x, y, z) is
+/// inside after carried_density, read only at cells carried to at most one side; `source_inside(cell)`: as the
+/// free function. Returns the cells in carry_less order.
+template <class ResolvedInside, class SourceInside>
+std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carries, const ResolvedInside& resolved_inside, const SourceInside& source_inside) {
+    using Cell3 = std::array<std::int64_t, 3>;
+    std::vector<Cell3> both; // sorted by carry_less: (z, y, x)
+    for (std::size_t q = 0; q + 1 < carries.size(); ++q) // per cell: the outside, then the inside
+        if (carries[q].cell == carries[q + 1].cell) both.push_back(carries[q].cell);
+    std::vector<Cell3> out;
+    if (both.empty()) return out;
+    auto cell_less = [](const Cell3& p, const Cell3& q) { return std::tie(p[2], p[1], p[0]) < std::tie(q[2], q[1], q[0]); };
+    std::vector<std::uint8_t> given(both.size(), 0);
+    auto inside = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+        const Cell3 c{x, y, z};
+        const auto it = std::lower_bound(both.begin(), both.end(), c, cell_less);
+        if (it != both.end() && *it == c) return !given[std::size_t(it - both.begin())];
+        return bool(resolved_inside(x, y, z));
+    };
+    constexpr std::int64_t R = kBridgeReach, W = 2 * R + 1;
+    static constexpr int kFace[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+    std::vector<std::uint8_t> seen;
+    std::vector<std::int64_t> queue;
+    for (std::size_t q = 0; q < both.size(); ++q) {
+        const Cell3 c = both[q];
+        bool n[3][3][3];
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) n[dz + 1][dy + 1][dx + 1] = (dx | dy | dz) == 0 || inside(c[0] + dx, c[1] + dy, c[2] + dz);
+        // A bridge joins inside parts that are apart around it (faces joined, within its 18 neighbours) and
+        // stands in one outside part (faces and edges joined, within its 26): a wall's cell has outside on two sides.
+        if (local_parts(n, true) < 2 || local_parts(n, false) != 1) continue;
+        // Breadth-first from one inside face neighbour over the window around c, c left out.
+        seen.assign(std::size_t(W * W * W), 0);
+        queue.clear();
+        auto key = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return (x - c[0] + R) + W * ((y - c[1] + R) + W * (z - c[2] + R)); };
+        seen[std::size_t(key(c[0], c[1], c[2]))] = 1;
+        std::int64_t targets[6];
+        int count = 0, reached = 1;
+        for (const auto& f : kFace)
+            if (n[f[2] + 1][f[1] + 1][f[0] + 1]) targets[count++] = key(c[0] + f[0], c[1] + f[1], c[2] + f[2]);
+        queue.push_back(targets[0]), seen[std::size_t(targets[0])] = 1;
+        for (std::size_t head = 0; head < queue.size() && reached < count; ++head) {
+            const std::int64_t k = queue[head];
+            const std::int64_t x = k % W, y = (k / W) % W, z = k / (W * W);
+            for (const auto& f : kFace) {
+                const std::int64_t u = x + f[0], v = y + f[1], w = z + f[2];
+                if (u < 0 || v < 0 || w < 0 || u >= W || v >= W || w >= W) continue;
+                const std::int64_t m = u + W * (v + W * w);
+                if (seen[std::size_t(m)] || !inside(c[0] + u - R, c[1] + v - R, c[2] + w - R)) continue;
+                seen[std::size_t(m)] = 1;
+                queue.push_back(m);
+                reached += std::count(targets + 1, targets + count, m) > 0;
+            }
+        }
+        if (reached == count && !source_inside(c)) given[q] = 1, out.push_back(c);
+    }
+    return out;
 }
 
 } // namespace voxwarp::warp_internal

@@ -663,6 +663,7 @@ struct Warp::State {
     WarpDomain* consumed = nullptr; // a one-shot warp's domain, emptied once splatted
     std::vector<RegionCarry> carried; // per region, what its carried voxels carry (resolve.h)
     std::vector<Carry> carry_index;   // all the cells carried, sorted by carry_less
+    std::vector<std::pair<Index3, float>> unbridged; // the bridges (resolve.h) put outside, and what the resolve gave them
 
     void gather_carried() {
         std::vector<CarryImage> images;
@@ -797,6 +798,38 @@ struct Warp::State {
         });
     }
 
+    /// Set one target cell (target index space) of the result; cells outside it are left alone.
+    void set_cell(const Index3& cell, float value) {
+        constexpr std::int64_t S = SparseVoxmap::kSide;
+        const std::int64_t i = cell[0] - target.lo[0], j = cell[1] - target.lo[1], k = cell[2] - target.lo[2];
+        const auto& d = result.dims();
+        if (i < 0 || j < 0 || k < 0 || i >= d[0] || j >= d[1] || k >= d[2]) return;
+        const std::int64_t b = result.block_index(i / S, j / S, k / S);
+        float block[SparseVoxmap::kBlockVoxels];
+        if (const float* stored = result.block_values(b)) std::copy_n(stored, SparseVoxmap::kBlockVoxels, block);
+        else std::fill_n(block, SparseVoxmap::kBlockVoxels, result.block_uniform(b));
+        block[(i % S) + S * ((j % S) + S * (k % S))] = value;
+        result.set_block(b, block);
+    }
+    float cell_value(const Index3& cell) const { return result.at(cell[0] - target.lo[0], cell[1] - target.lo[1], cell[2] - target.lo[2]); }
+
+    /// Put back what the last unbridge took, before the rows are resolved again (an incremental update judges
+    /// every bridge again: resolve.h).
+    void restore_bridges() {
+        for (const auto& [cell, prior] : unbridged) set_cell(cell, prior);
+        unbridged.clear();
+    }
+    /// Put the bridges (resolve.h) of the resolved result outside.
+    void unbridge() {
+        const auto found = bridges(
+            carry_index, [&](std::int64_t x, std::int64_t y, std::int64_t z) { return cell_value({x, y, z}) >= 0.5f; },
+            [&](const Index3& cell) { return source_inside(domain, lattice, cell); });
+        for (const auto& cell : found) {
+            unbridged.push_back({cell, cell_value(cell)});
+            set_cell(cell, kCarriedOutside);
+        }
+    }
+
     void full(Progress* progress) {
         const auto regions = active_regions();
         // The accumulator spans the regions' conservative bounds (its block table is all it costs), the target
@@ -826,8 +859,10 @@ struct Warp::State {
         for (std::size_t i = 0; i < 3; ++i) dims[i] = target.hi[i] - target.lo[i] + 1;
         result = SparseVoxmap(dims, domain.target_origin + domain.target_voxel_size * Eigen::Vector3d(double(target.lo[0]), double(target.lo[1]), double(target.lo[2])),
                               domain.target_voxel_size);
+        unbridged.clear();
         gather_carried();
         resolve_rows(target);
+        unbridge();
     }
 };
 
@@ -893,8 +928,10 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
     }
     touched.include(after);
     // The rows the moved regions' carried cells left or reached lie in the old and new boxes: resolved again.
+    s.restore_bridges();
     s.gather_carried();
     if (!touched.empty()) s.resolve_rows(touched);
+    s.unbridge();
 }
 
 SparseVoxmap warp(const WarpDomain& domain, const Lattice& lattice, const WarpOptions& options) {
