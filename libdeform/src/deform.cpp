@@ -501,12 +501,20 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     // back (and the density's own corners, where a model is thinner than a voxel, are not the model's).
     if (sharpen && features.empty()) eo.mesher = Mesher::marching_cubes;
     TriangleMesh out = extract(voxmap, eo);
-    const SnapOptions so{.voxel_size = voxmap.voxel_size()};
+    SnapOptions so{.voxel_size = voxmap.voxel_size()};
     std::unique_ptr<SourceSurface> own_surface; // the input indexed once for snapping and transfer both
     auto input_surface = [&]() -> const SourceSurface& {
         if (!surface && !own_surface) own_surface = std::make_unique<SourceSurface>(mesh);
         return surface ? *surface : *own_surface;
     };
+    // The last edit's move targets whose points lie on the input's surface: the output passes through them (a
+    // target is the exact image of its point, so this is the snap's own answer there, where no source falls).
+    if (options.snap && !script.edits.empty())
+        for (const auto& c : script.edits.back().constraints) {
+            if (c.kind != ConstraintKind::move) continue;
+            const auto at_input = pull_back(steps, c.to, nullptr);
+            if (at_input && input_surface().nearest(*at_input, Eigen::Vector3d::Zero(), 0.1 * so.voxel_size).face >= 0) so.anchors.push_back(*at_input);
+        }
     auto find = [&](const TriangleMesh& m) { return find_sources(m, input_surface(), steps, so); };
     std::vector<SourcePoint> sources;
     if (options.snap && out.face_count() > 0) {

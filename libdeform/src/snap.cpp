@@ -503,6 +503,34 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
         for (std::size_t v = 0; v < n; ++v)
             if (snapped[v] && (target[v] - P[v]).norm() > room[v] / 3) snapped[v] = 0;
     }
+    // Anchors: a tip or thin edge that the voxmap rounds off has no output vertex whose source lies on it, and a
+    // move's target there was missed by most of a voxel (the bunny's ear tip: 0.83). The vertex nearest the
+    // anchor's image, where the snap puts it, goes onto the image; the fold checks below still apply.
+    std::vector<char> anchored(n, 0);
+    for (const auto& a : options.anchors) {
+        const Eigen::Vector3d image = push_forward(steps, a);
+        if (!image.allFinite()) continue;
+        std::size_t best = n;
+        double nearest = options.anchor_reach_voxels * options.voxel_size;
+        for (std::size_t v = 0; v < n; ++v) {
+            const double d = (at(std::int32_t(v)) - image).norm();
+            if (in_face[v] && d < nearest) nearest = d, best = v;
+        }
+        if (best == n || anchored[best]) continue;
+        // The pull fades over the anchor reach (or twice the pull) around the vertex, flat at first, so that the faces
+        // near it move with it and those farther out turn a little each, rather than a few folding (a thin tip's
+        // faces stand steep to each other). Only the vertex's own sheet follows, not the far side of a thin part.
+        const Eigen::Vector3d from = at(std::int32_t(best)), pull = image - from;
+        const double reach = std::max(options.anchor_reach_voxels * options.voxel_size, 2 * pull.norm());
+        std::vector<std::pair<std::size_t, Eigen::Vector3d>> moves;
+        for (std::size_t v = 0; v < n; ++v) {
+            const double d = (P[v] - P[best]).norm();
+            if (!in_face[v] || anchored[v] || d >= reach || normal[v].dot(normal[best]) <= 0) continue;
+            const double w = (1 - (d / reach) * (d / reach)) * (1 - (d / reach) * (d / reach));
+            moves.push_back({v, at(std::int32_t(v)) + w * pull});
+        }
+        for (const auto& [v, p] : moves) target[v] = p, snapped[v] = 1, anchored[v] = 1;
+    }
     // A triangle fails when a snapped corner turns it by more than 90 degrees, collapses it, or turns it away from
     // the surface's normal as extracted at a corner (a fold with its neighbours, which need not flip it).
     auto fails = [&](const std::array<std::int32_t, 3>& t) {
@@ -545,6 +573,7 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
         if (snapped[v]) {
             output.vertices[v] = target[v];
             ++report.snapped;
+            report.anchored += std::size_t(anchored[v]);
         } else if (in_face[v]) {
             ++report.unsnapped;
         }

@@ -44,6 +44,11 @@ struct SnapOptions {
     double voxel_size = 0;       ///< the voxmap's h, world units (> 0)
     double max_move_voxels = 0.5; ///< a vertex whose exact image lies farther than this stays where it is
     double reach_voxels = 2;     ///< sources are looked for this far (input frame) from the pulled-back vertex
+    /// Points of the input surface (input frame) the output must pass through: snap_to_sources puts the output
+    /// vertex nearest each one's image (within anchor_reach_voxels) on it, unless a face around it would flip. A
+    /// move's point, whose target the user asked for, on a tip or thin edge the voxmap rounds off.
+    std::vector<Eigen::Vector3d> anchors;
+    double anchor_reach_voxels = 1.5;
 };
 
 /// The input surface indexed for nearest-point queries (a CGAL AABB tree over its triangles): build it once and
@@ -78,13 +83,14 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const Triangle
                                       const SnapOptions& options);
 
 struct SnapReport {
-    std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point
+    std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor)
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
+    std::size_t anchored = 0;  ///< of the snapped, those put on an anchor's image
 };
 
 /// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
-/// max_move_voxels, or a face around it would flip (turn by more than 90 degrees or collapse). The mesh's
-/// connectivity is kept. Parallel (oneTBB).
+/// max_move_voxels, or a face around it would flip (turn by more than 90 degrees or collapse); and the vertex
+/// nearest each anchor's image onto it (SnapOptions::anchors). The mesh's connectivity is kept. Parallel (oneTBB).
 SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
                            const SnapOptions& options);
 
