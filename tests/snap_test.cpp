@@ -229,17 +229,27 @@ TEST(Snap, BentBoxFacesFollowTheExactWarp) {
     EXPECT_FALSE(self_intersects(out));
 }
 
+/// A bundled edit of a bundled mesh at `resolution`, deformed with snapping and without.
+struct SnappedAndPlain {
+    TriangleMesh out, plain;
+    DeformReport report, plain_report;
+};
+SnappedAndPlain deform_both_ways(const std::string& mesh, const std::string& edit, int resolution) {
+    const TriangleMesh input = read_mesh(test::data_path(mesh));
+    const EditScript script = read_edit_file(test::data_path(edit));
+    DeformOptions options;
+    options.voxelize.resolution = resolution;
+    SnappedAndPlain r;
+    r.out = deform_mesh(input, script, options, r.report);
+    options.snap = false;
+    r.plain = deform_mesh(input, script, options, r.plain_report);
+    return r;
+}
+
 TEST(Snap, AScanWhoseSheetsAlmostTouchDoesNotFoldIntoItself) {
     // The snowden scan's nose edit at 64: the thin-part carry leaves extracted sheets a few hundredths of a voxel
     // apart; snapping each onto its own side of the input must not push one through the other.
-    const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
-    const EditScript script = read_edit_file(test::data_path("snowden_nose.json"));
-    DeformOptions options;
-    options.voxelize.resolution = 64;
-    DeformReport report, plain_report;
-    const TriangleMesh out = deform_mesh(scan, script, options, report);
-    options.snap = false;
-    const TriangleMesh plain = deform_mesh(scan, script, options, plain_report);
+    const auto [out, plain, report, plain_report] = deform_both_ways("snowden_lo.obj", "snowden_nose.json", 64);
     // Walls about a voxel thick everywhere: vertices move at most a third of the way to the other sheet.
     EXPECT_GT(report.snapped_vertices, out.vertices.size() / 4);
     EXPECT_FALSE(self_intersects(plain));
@@ -252,14 +262,7 @@ TEST(Snap, AMovesTargetOnATipTheVoxmapRoundsOffIsHit) {
     // data/bunny_ear.json drags the ear's tip, which the voxmap rounds off (0.41 voxel at 128): no output vertex has
     // its source there, and marching cubes missed the target by 0.83 voxel. The target is the exact image of the
     // point, so the vertex nearest it goes onto it, its neighbours following part of the way (SnapOptions::anchors).
-    const TriangleMesh bunny = read_mesh(test::data_path("bunny.obj"));
-    const EditScript script = read_edit_file(test::data_path("bunny_ear.json"));
-    DeformOptions options;
-    options.voxelize.resolution = 128;
-    DeformReport report, plain_report;
-    const TriangleMesh out = deform_mesh(bunny, script, options, report);
-    options.snap = false;
-    deform_mesh(bunny, script, options, plain_report);
+    const auto [out, unused, report, plain_report] = deform_both_ways("bunny.obj", "bunny_ear.json", 128);
     const double plain = plain_report.edits[0].constraints[0].surface_miss_voxels, snapped = report.edits[0].constraints[0].surface_miss_voxels;
     std::printf("ear target missed by %.3f voxel unsnapped, %.3f snapped\n", plain, snapped);
     EXPECT_GT(plain, 0.5); // what the tip's rounding costs, so that the bound below means something
