@@ -159,17 +159,16 @@ def test_deform_reports_like_the_cli():
     assert not plain["snap"] and plain["snapped_vertices"] == 0
     assert np.array_equal(F2, F3) and not np.array_equal(V2, V3)
     # Snapping moves a vertex at most half a voxel, except around a move's target, whose nearest vertex goes onto
-    # it (anchors, within 1.5 voxels) with its neighbours fading out within twice that pull.
+    # it (anchors, within 1.5 voxels) with the vertices within three times that pull (at least 1.5 voxels) following.
     h = report["voxel_size"]
     with open(data("box_twist.json")) as f:
         targets = np.array([c["to"] for e in json.load(f)["edits"] for c in e["constraints"] if "to" in c and "move" in c])
-    near = (np.linalg.norm(V3[:, None, :] - targets[None, :, :], axis=2) <= 3.0 * h).any(axis=1)
+    near = (np.linalg.norm(V3[:, None, :] - targets[None, :, :], axis=2) <= 6.0 * h).any(axis=1)
     moved = np.linalg.norm(V2 - V3, axis=1)
     assert moved[~near].max() <= 0.5 * h * (1 + 1e-9)
-    assert moved.max() <= 1.5 * h * (1 + 1e-9)
-    # The corners the edit drags lie on the output (unsnapped, marching cubes rounds them off by 0.9-1.0 voxel),
-    # but one, whose pull would fold a face there, is put back.
-    assert sum(c["surface_miss_voxels"] <= 0.01 for c in moves) >= 4
+    assert moved.max() <= 2.0 * h * (1 + 1e-9)  # 1.5 voxels of pull beyond a snap of at most half a voxel
+    # The corners the edit drags lie on the output (unsnapped, marching cubes rounds them off by 0.9-1.0 voxel).
+    assert all(c["surface_miss_voxels"] <= 0.01 for c in moves)
 
 
 def _turned_box():
