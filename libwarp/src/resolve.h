@@ -36,6 +36,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <tuple>
@@ -214,23 +215,41 @@ constexpr std::int64_t kBridgeReach = 32;
 /// neighbours; for the outside, cells of its 26 neighbours joined across faces and edges, counted where they hold
 /// one of its 18 neighbours (extract's connectivity: inside across faces, outside across faces and edges).
 inline int local_parts(const bool (&n)[3][3][3], bool inside) {
-    auto norm1 = [](int q) { return std::abs(q % 3 - 1) + std::abs(q / 3 % 3 - 1) + std::abs(q / 9 - 1); };
-    auto member = [&](int q) { return q != 13 && n[q / 9][q / 3 % 3][q % 3] == inside && (!inside || norm1(q) <= 2); };
-    int label[27] = {};
-    int parts = 0;
-    for (int q = 0; q < 27; ++q) {
-        if (!member(q) || label[q] || norm1(q) > (inside ? 1 : 2)) continue;
-        int stack[27], top = 0;
-        stack[top++] = q, label[q] = 1;
-        ++parts;
-        while (top) {
-            const int p = stack[--top];
-            for (int r = 0; r < 27; ++r) {
-                if (label[r] || !member(r)) continue;
-                const int dx = std::abs(p % 3 - r % 3), dy = std::abs(p / 3 % 3 - r / 3 % 3), dz = std::abs(p / 9 - r / 9);
-                if (dx + dy + dz <= (inside ? 1 : 2) && dx <= 1 && dy <= 1 && dz <= 1) label[r] = 1, stack[top++] = r;
+    // The 27 cells as bits (x + 3 y + 9 z), with each cell's neighbours across faces (inside) or faces and edges
+    // (outside) as masks: a part is grown by OR-ing its cells' masks.
+    struct Tables {
+        std::uint32_t faces[27], edges[27], near1 = 0, near2 = 0;
+        Tables() {
+            for (int q = 0; q < 27; ++q) {
+                faces[q] = edges[q] = 0;
+                const int d = std::abs(q % 3 - 1) + std::abs(q / 3 % 3 - 1) + std::abs(q / 9 - 1);
+                if (q != 13 && d <= 1) near1 |= 1u << q;
+                if (q != 13 && d <= 2) near2 |= 1u << q;
+                for (int r = 0; r < 27; ++r) {
+                    const int dx = std::abs(q % 3 - r % 3), dy = std::abs(q / 3 % 3 - r / 3 % 3), dz = std::abs(q / 9 - r / 9);
+                    if (dx > 1 || dy > 1 || dz > 1 || q == r) continue;
+                    if (dx + dy + dz == 1) faces[q] |= 1u << r;
+                    if (dx + dy + dz <= 2) edges[q] |= 1u << r;
+                }
             }
         }
+    };
+    static const Tables tables;
+    std::uint32_t members = 0;
+    for (int q = 0; q < 27; ++q)
+        if (q != 13 && n[q / 9][q / 3 % 3][q % 3] == inside) members |= 1u << q;
+    if (inside) members &= tables.near2; // the 18 neighbours
+    const std::uint32_t* joins = inside ? tables.faces : tables.edges;
+    std::uint32_t seeds = members & (inside ? tables.near1 : tables.near2);
+    int parts = 0;
+    while (seeds) {
+        std::uint32_t part = seeds & (~seeds + 1), grown = part;
+        do {
+            part = grown;
+            for (std::uint32_t bits = part; bits; bits &= bits - 1) grown |= joins[std::countr_zero(bits)] & members;
+        } while (grown != part);
+        members &= ~part, seeds &= ~part;
+        ++parts;
     }
     return parts;
 }
@@ -250,7 +269,7 @@ inline int local_parts(const bool (&n)[3][3][3], bool inside) {
 /// Cells are taken in carry_less order, each judged with the ones before it as decided: the result does not
 /// depend on threads, and an incremental update that judges them all again agrees with the full warp.
 /// `carries`: sorted by carry_less (link_carries); `resolved_inside(x, y, z)`: whether target cell (x, y, z) is
-/// inside after carried_density, read only at cells carried to at most one side; `source_inside(cell)`: as the
+/// inside after carried_density (so every cell carried to both sides reads inside); `source_inside(cell)`: as the
 /// free function. Returns the cells in carry_less order.
 template <class ResolvedInside, class SourceInside>
 std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carries, const ResolvedInside& resolved_inside, const SourceInside& source_inside) {
@@ -260,17 +279,20 @@ std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carri
         if (carries[q].cell == carries[q + 1].cell) both.push_back(carries[q].cell);
     std::vector<Cell3> out;
     if (both.empty()) return out;
+    // Every cell carried to both sides resolved inside (carried_density), so a cell is inside as resolved unless
+    // this pass gave it to the gap: the few given, kept sorted.
     auto cell_less = [](const Cell3& p, const Cell3& q) { return std::tie(p[2], p[1], p[0]) < std::tie(q[2], q[1], q[0]); };
-    std::vector<std::uint8_t> given(both.size(), 0);
+    std::vector<Cell3> given;
     auto inside = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+        if (!resolved_inside(x, y, z)) return false;
+        if (given.empty()) return true;
         const Cell3 c{x, y, z};
-        const auto it = std::lower_bound(both.begin(), both.end(), c, cell_less);
-        if (it != both.end() && *it == c) return !given[std::size_t(it - both.begin())];
-        return bool(resolved_inside(x, y, z));
+        return !std::binary_search(given.begin(), given.end(), c, cell_less);
     };
     constexpr std::int64_t R = kBridgeReach, W = 2 * R + 1;
     static constexpr int kFace[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
-    std::vector<std::uint8_t> seen;
+    std::vector<std::uint32_t> seen; // == stamp: visited by this cell's search (no clearing between searches)
+    std::uint32_t stamp = 0;
     std::vector<std::int64_t> queue;
     for (std::size_t q = 0; q < both.size(); ++q) {
         const Cell3 c = both[q];
@@ -278,19 +300,23 @@ std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carri
         for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
                 for (int dx = -1; dx <= 1; ++dx) n[dz + 1][dy + 1][dx + 1] = (dx | dy | dz) == 0 || inside(c[0] + dx, c[1] + dy, c[2] + dz);
+        int inside_faces = 0;
+        for (const auto& f : kFace) inside_faces += n[f[2] + 1][f[1] + 1][f[0] + 1];
+        if (inside_faces < 2) continue; // one inside part at most
         // A bridge joins inside parts that are apart around it (faces joined, within its 18 neighbours) and
         // stands in one outside part (faces and edges joined, within its 26): a wall's cell has outside on two sides.
         if (local_parts(n, true) < 2 || local_parts(n, false) != 1) continue;
         // Breadth-first from one inside face neighbour over the window around c, c left out.
-        seen.assign(std::size_t(W * W * W), 0);
+        if (seen.empty()) seen.assign(std::size_t(W * W * W), 0);
+        ++stamp;
         queue.clear();
         auto key = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return (x - c[0] + R) + W * ((y - c[1] + R) + W * (z - c[2] + R)); };
-        seen[std::size_t(key(c[0], c[1], c[2]))] = 1;
+        seen[std::size_t(key(c[0], c[1], c[2]))] = stamp;
         std::int64_t targets[6];
         int count = 0, reached = 1;
         for (const auto& f : kFace)
             if (n[f[2] + 1][f[1] + 1][f[0] + 1]) targets[count++] = key(c[0] + f[0], c[1] + f[1], c[2] + f[2]);
-        queue.push_back(targets[0]), seen[std::size_t(targets[0])] = 1;
+        queue.push_back(targets[0]), seen[std::size_t(targets[0])] = stamp;
         for (std::size_t head = 0; head < queue.size() && reached < count; ++head) {
             const std::int64_t k = queue[head];
             const std::int64_t x = k % W, y = (k / W) % W, z = k / (W * W);
@@ -298,13 +324,13 @@ std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carri
                 const std::int64_t u = x + f[0], v = y + f[1], w = z + f[2];
                 if (u < 0 || v < 0 || w < 0 || u >= W || v >= W || w >= W) continue;
                 const std::int64_t m = u + W * (v + W * w);
-                if (seen[std::size_t(m)] || !inside(c[0] + u - R, c[1] + v - R, c[2] + w - R)) continue;
-                seen[std::size_t(m)] = 1;
+                if (seen[std::size_t(m)] == stamp || !inside(c[0] + u - R, c[1] + v - R, c[2] + w - R)) continue;
+                seen[std::size_t(m)] = stamp;
                 queue.push_back(m);
                 reached += std::count(targets + 1, targets + count, m) > 0;
             }
         }
-        if (reached == count && !source_inside(c)) given[q] = 1, out.push_back(c);
+        if (reached == count && !source_inside(c)) given.push_back(c), out.push_back(c); // in carry_less order, so sorted
     }
     return out;
 }
