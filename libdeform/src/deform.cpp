@@ -507,13 +507,18 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
         if (!surface && !own_surface) own_surface = std::make_unique<SourceSurface>(mesh);
         return surface ? *surface : *own_surface;
     };
-    // The last edit's move targets whose points lie on the input's surface: the output passes through them (a
-    // target is the exact image of its point, so this is the snap's own answer there, where no source falls).
-    if (options.snap && !script.edits.empty())
-        for (const auto& c : script.edits.back().constraints) {
-            if (c.kind != ConstraintKind::move) continue;
-            const auto at_input = pull_back(steps, c.to, nullptr);
-            if (at_input && input_surface().nearest(*at_input, Eigen::Vector3d::Zero(), 0.1 * so.voxel_size).face >= 0) so.anchors.push_back(*at_input);
+    // Move targets whose points lie on the input's surface: the output passes through their images (a target is
+    // the exact image of its point after its edit, so this is the snap's own answer there, where no source falls).
+    // Edit e's target goes back through the steps up to its own, and forward through all.
+    if (options.snap)
+        for (std::size_t e = 0, done = 0; e < script.edits.size() && e < report.edits.size(); ++e) {
+            done += std::size_t(std::max(0, report.edits[e].steps));
+            const std::vector<WarpStep> upto(steps.begin(), steps.begin() + std::ptrdiff_t(std::min(done, steps.size())));
+            for (const auto& c : script.edits[e].constraints) {
+                if (c.kind != ConstraintKind::move) continue;
+                const auto at_input = pull_back(upto, c.to, nullptr);
+                if (at_input && input_surface().nearest(*at_input, Eigen::Vector3d::Zero(), 0.1 * so.voxel_size).face >= 0) so.anchors.push_back(*at_input);
+            }
         }
     auto find = [&](const TriangleMesh& m) { return find_sources(m, input_surface(), steps, so); };
     std::vector<SourcePoint> sources;
