@@ -517,9 +517,10 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
             if (in_face[v] && d < nearest) nearest = d, best = v;
         }
         if (best == n || anchored[best]) continue;
-        // The pull fades over the anchor reach (or three times the pull) around the vertex, flat at first, so that the faces
-        // near it move with it and those farther out turn a little each, rather than a few folding (a thin tip's
-        // faces stand steep to each other). Only the vertex's own sheet follows, not the far side of a thin part.
+        // The pull fades over the anchor reach (or three times the pull) around the vertex, flat at first, so that
+        // the faces near it move with it and those farther out turn a little each, rather than a few folding (a
+        // thin tip's faces stand steep to each other). Only the vertex's own sheet follows, not the far side of a
+        // thin part.
         const Eigen::Vector3d from = at(std::int32_t(best)), pull = image - from;
         const double reach = std::max(options.anchor_reach_voxels * options.voxel_size, 3 * pull.norm());
         std::vector<std::pair<std::size_t, Eigen::Vector3d>> moves;

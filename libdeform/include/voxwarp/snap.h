@@ -45,8 +45,9 @@ struct SnapOptions {
     double max_move_voxels = 0.5; ///< a vertex whose exact image lies farther than this stays where it is
     double reach_voxels = 2;     ///< sources are looked for this far (input frame) from the pulled-back vertex
     /// Points of the input surface (input frame) the output must pass through: snap_to_sources puts the output
-    /// vertex nearest each one's image (within anchor_reach_voxels) on it, unless a face around it would flip. A
-    /// move's point, whose target the user asked for, on a tip or thin edge the voxmap rounds off.
+    /// vertex nearest each one's image (within anchor_reach_voxels) on it, the vertices of its sheet around it
+    /// following part of the way, unless a face would flip. A move's point, whose target the user asked for, on a
+    /// tip or thin edge the voxmap rounds off.
     std::vector<Eigen::Vector3d> anchors;
     double anchor_reach_voxels = 1.5;
 };
