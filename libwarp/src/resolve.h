@@ -207,7 +207,9 @@ inline float carried_density(float d, bool carried_inside, bool carried_outside)
     return d;
 }
 
-/// How far (voxels, each way) bridges looks for another way between a cell's inside neighbours.
+/// How far (voxels, each way) bridges looks for another way between a cell's inside neighbours. On the snowden
+/// nose edit at 128 one bridge's loop closes only 24 voxels out (the glasses' rim joins the face at its ends):
+/// 8 left two of the three bridges, 16 one. The search stops as soon as every neighbour is reached.
 constexpr std::int64_t kBridgeReach = 32;
 
 /// Parts of one side around a cell, in its 3 x 3 x 3 neighbourhood `n` ([z][y][x], true inside; the centre left
