@@ -279,17 +279,14 @@ std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carri
     std::vector<Cell3> both; // sorted by carry_less: (z, y, x)
     for (std::size_t q = 0; q + 1 < carries.size(); ++q) // per cell: the outside, then the inside
         if (carries[q].cell == carries[q + 1].cell) both.push_back(carries[q].cell);
-    std::vector<Cell3> out;
+    std::vector<Cell3> out; // the cells given to the gap so far, in carry_less order
     if (both.empty()) return out;
     // Every cell carried to both sides resolved inside (carried_density), so a cell is inside as resolved unless
-    // this pass gave it to the gap: the few given, kept sorted.
+    // this pass gave it to the gap.
     auto cell_less = [](const Cell3& p, const Cell3& q) { return std::tie(p[2], p[1], p[0]) < std::tie(q[2], q[1], q[0]); };
-    std::vector<Cell3> given;
     auto inside = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
         if (!resolved_inside(x, y, z)) return false;
-        if (given.empty()) return true;
-        const Cell3 c{x, y, z};
-        return !std::binary_search(given.begin(), given.end(), c, cell_less);
+        return out.empty() || !std::binary_search(out.begin(), out.end(), Cell3{x, y, z}, cell_less);
     };
     constexpr std::int64_t R = kBridgeReach, W = 2 * R + 1;
     static constexpr int kFace[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
@@ -332,7 +329,7 @@ std::vector<std::array<std::int64_t, 3>> bridges(const std::vector<Carry>& carri
                 reached += std::count(targets + 1, targets + count, m) > 0;
             }
         }
-        if (reached == count && !source_inside(c)) given.push_back(c), out.push_back(c); // in carry_less order, so sorted
+        if (reached == count && !source_inside(c)) out.push_back(c); // in carry_less order, so out stays sorted
     }
     return out;
 }
