@@ -574,7 +574,6 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
         if (snapped[v]) {
             output.vertices[v] = target[v];
             ++report.snapped;
-            report.anchored += std::size_t(anchored[v]);
         } else if (in_face[v]) {
             ++report.unsnapped;
         }

@@ -86,7 +86,6 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const Triangle
 struct SnapReport {
     std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor)
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
-    std::size_t anchored = 0;  ///< of the snapped, those put on an anchor's image
 };
 
 /// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
