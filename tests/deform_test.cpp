@@ -363,14 +363,6 @@ TEST(Deform, AReportPassedInAgainHoldsOnlyTheLastRunsEdits) {
     EXPECT_EQ(report.edits.size(), script.edits.size());
 }
 
-/// Two meshes in one (their vertices renumbered).
-TriangleMesh joined(TriangleMesh a, const TriangleMesh& b) {
-    const auto offset = std::int32_t(a.vertices.size());
-    a.vertices.insert(a.vertices.end(), b.vertices.begin(), b.vertices.end());
-    for (auto t : b.triangles) a.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-    return a;
-}
-
 TEST(ThinParts, APlateBetweenVoxelCentresIsReportedAndTheAdvisedResolutionKeepsIt) {
     // A 2-unit cube and, beside it, a plate 0.3 voxel thick lying between two planes of voxel centres: a flood fill
     // (the mesh is closed) finds no centre inside the plate, and the plate vanishes. --sign auto sees that and
@@ -378,7 +370,7 @@ TEST(ThinParts, APlateBetweenVoxelCentresIsReportedAndTheAdvisedResolutionKeepsI
     const int resolution = 24;
     const double h = 5.0 / resolution; // the longest side is 5 (x from 0 to 5)
     const double z0 = 4 * h + 0.35 * h, z1 = z0 + 0.3 * h; // centres lie at z = (k - 3) h
-    const TriangleMesh mesh = joined(test::box_mesh({0, 0, 0}, {2, 2, 2}, 1), test::box_mesh({3, 0.2, z0}, {5, 1.8, z1}, 4));
+    const TriangleMesh mesh = test::joined(test::box_mesh({0, 0, 0}, {2, 2, 2}, 1), test::box_mesh({3, 0.2, z0}, {5, 1.8, z1}, 4));
     EditScript script;
     script.edits.push_back({{pin({0, 0, 0})}});
     DeformOptions options;

@@ -149,6 +149,14 @@ inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& h
     return m;
 }
 
+/// Two meshes in one (b's vertices renumbered after a's).
+inline TriangleMesh joined(TriangleMesh a, const TriangleMesh& b) {
+    const auto offset = std::int32_t(a.vertices.size());
+    a.vertices.insert(a.vertices.end(), b.vertices.begin(), b.vertices.end());
+    for (auto t : b.triangles) a.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    return a;
+}
+
 /// Split every triangle into four until no edge is longer than `longest`: the vertex FFD of the result follows
 /// the map between the input's vertices.
 inline TriangleMesh subdivided(TriangleMesh m, double longest) {

@@ -314,13 +314,15 @@ TEST(Warp, ThinPlateKeepsItsTopologyUnderTurnsStretchesAndSqueezes) {
 /// Two thin plates (each about half a voxel thick) parallel, their centres `apart` voxels apart, turned by `turn`.
 Voxmap plate_pair(const Eigen::Matrix3d& turn, double apart) {
     constexpr double h = 0.05;
-    TriangleMesh pair = test::box_mesh({-1, -1, -0.01}, {1, 1, 0.01}, 2);
-    const TriangleMesh second = test::box_mesh({-1, -1, apart * h - 0.01}, {1, 1, apart * h + 0.01}, 2);
-    const auto offset = std::int32_t(pair.vertices.size());
-    pair.vertices.insert(pair.vertices.end(), second.vertices.begin(), second.vertices.end());
-    for (const auto& t : second.triangles) pair.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+    TriangleMesh pair = test::joined(test::box_mesh({-1, -1, -0.01}, {1, 1, 0.01}, 2), test::box_mesh({-1, -1, apart * h - 0.01}, {1, 1, apart * h + 0.01}, 2));
     for (auto& v : pair.vertices) v = turn * v;
     return voxelize(pair, {.voxel_size = h, .sign = SignMethod::winding_number});
+}
+
+/// `rest` turned by 0.055 rad and shifted by a fraction of a voxel: axis-aligned plates a voxel apart come out
+/// bridged in a few cells (resolve.h, bridges).
+Lattice turned_a_little(const Lattice& rest) {
+    return affine(rest, Eigen::AngleAxisd(0.055, Eigen::Vector3d(1, 2, 0.3).normalized()).toRotationMatrix(), Eigen::Vector3d(0.11, 0.017, 0.05));
 }
 
 TEST(Warp, BridgesBetweenThinPlatesMatchTheNaiveReference) {
@@ -328,7 +330,7 @@ TEST(Warp, BridgesBetweenThinPlatesMatchTheNaiveReference) {
     // warps give some of those cells back to the gap, and must give back the same ones.
     const Voxmap input = plate_pair(Eigen::Matrix3d::Identity(), 2.0);
     const WarpDomain domain = make_domain(input, {});
-    const Lattice moved = affine(domain.lattice, Eigen::AngleAxisd(0.055, Eigen::Vector3d(1, 2, 0.3).normalized()).toRotationMatrix(), Eigen::Vector3d(0.11, 0.017, 0.05));
+    const Lattice moved = turned_a_little(domain.lattice);
     const Voxmap fast = to_dense(warp(domain, moved));
     EXPECT_LE(max_difference(fast, warp_reference(domain, moved)), 1e-6);
 }
@@ -349,7 +351,7 @@ TEST(Warp, IncrementalEqualsFullRecomputeWithBridges) {
     // back the cells it gave to the gap and judges them all again, as the full warp does.
     const Voxmap input = plate_pair(Eigen::Matrix3d::Identity(), 2.0);
     const WarpDomain domain = make_domain(input, {});
-    Warp progressive(domain, affine(domain.lattice, Eigen::AngleAxisd(0.055, Eigen::Vector3d(1, 2, 0.3).normalized()).toRotationMatrix(), Eigen::Vector3d(0.11, 0.017, 0.05)));
+    Warp progressive(domain, turned_a_little(domain.lattice));
     std::mt19937 rng(3); // a bridge appears, goes and comes back
     std::uniform_int_distribution<int> index(2, 6);
     std::normal_distribution<double> n(0, input.voxel_size);
