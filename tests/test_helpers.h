@@ -157,6 +157,12 @@ inline TriangleMesh joined(TriangleMesh a, const TriangleMesh& b) {
     return a;
 }
 
+/// The mesh facing the other way (each triangle's winding reversed): a cavity's walls, from a closed mesh.
+inline TriangleMesh inverted(TriangleMesh m) {
+    for (auto& t : m.triangles) std::swap(t[1], t[2]);
+    return m;
+}
+
 /// Split every triangle into four until no edge is longer than `longest`: the vertex FFD of the result follows
 /// the map between the input's vertices.
 inline TriangleMesh subdivided(TriangleMesh m, double longest) {

@@ -606,11 +606,8 @@ TEST(Voxelize, WindingNumberAgreesWithFloodFillOnWatertightInput) {
 TEST(Voxelize, AutoSignGivesUpAFloodFillThatLeaksOrLosesWalls) {
     // A closed box with a box-shaped cavity, its wall 0.36 voxel thick: flood fill finds no voxel centre in the wall
     // and fills the cavity (a solid box); winding numbers keep the wall, two surfaces.
-    TriangleMesh shell = test::box_mesh({-1, -1, -1}, {1, 1, 1}, 4);
-    const TriangleMesh cavity = test::box_mesh(Eigen::Vector3d::Constant(-0.985), Eigen::Vector3d::Constant(0.985), 4);
-    const auto offset = std::int32_t(shell.vertices.size());
-    shell.vertices.insert(shell.vertices.end(), cavity.vertices.begin(), cavity.vertices.end());
-    for (const auto& t : cavity.triangles) shell.triangles.push_back({t[0] + offset, t[2] + offset, t[1] + offset}); // facing in
+    const TriangleMesh shell = test::joined(test::box_mesh({-1, -1, -1}, {1, 1, 1}, 4),
+                                            test::inverted(test::box_mesh(Eigen::Vector3d::Constant(-0.985), Eigen::Vector3d::Constant(0.985), 4)));
     ASSERT_TRUE(topology(shell).watertight());
     VoxelizeReport done;
     const MeshTopology flood = topology(extract(voxelize(shell, {.resolution = 48, .sign = SignMethod::flood_fill})));
