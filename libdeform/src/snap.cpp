@@ -280,10 +280,9 @@ SourcePoint SourceSurface::nearest(const Eigen::Vector3d& point, const Eigen::Ve
 
 namespace snap_internal {
 
-/// Per vertex, how far the nearest other sheet of the surface is, looking no farther than `radius` (+infinity
-/// beyond): the nearest vertex whose normal looks the other way (the far side of a thin wall or gap, which the
-/// extraction may have put a hundredth of a voxel away). Snapping a vertex farther than a fraction of that could
-/// push it through the other sheet.
+/// Per vertex, the nearest vertex of another sheet of the surface within `radius`, or -1: the nearest vertex whose
+/// normal looks the other way (the far side of a thin wall or gap, which the extraction may have put a hundredth of
+/// a voxel away, or a voxel away all over a scan's thin shell). A snap must not push a vertex through that sheet.
 ///
 /// Vertices are sorted by cell of `radius` (keys z-major, then y, then x), so the three x-neighbours of a cell are
 /// one run of the sorted array, and walking the cells in order, each of the nine runs a cell needs starts at or
@@ -291,7 +290,7 @@ namespace snap_internal {
 /// Most of a surface has no other sheet within reach, so each cell keeps the cone of its vertices' normals (a unit
 /// axis and the half-angle about it), and a cell whose cone cannot hold a normal looking against the vertex's, or
 /// against the whole cone of the cell at hand, is passed over without reading its vertices.
-std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::vector<Eigen::Vector3d>& normal, double radius) {
+std::vector<std::int32_t> other_sheet(const std::vector<Eigen::Vector3d>& P, const std::vector<Eigen::Vector3d>& normal, double radius) {
     const std::size_t n = P.size();
     const double inverse = 1 / radius;
     constexpr std::int64_t kOffset = 1 << 20; // cells are 21-bit fields, offset to stay positive
@@ -345,7 +344,8 @@ std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::
         if (c.cos < 0 || d.cos < 0 || c.cos * d.cos - c.sin * d.sin <= 0) return false;
         return c.axis.dot(d.axis) > c.sin * d.cos + c.cos * d.sin;
     };
-    std::vector<double> out(n, radius * radius);
+    std::vector<double> nearest(n, radius * radius);
+    std::vector<std::int32_t> out(n, -1);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size() - 1, 256), [&](const auto& r) {
         std::array<std::size_t, 9> cursor{};
         bool started = false;
@@ -371,7 +371,7 @@ std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::
                             for (std::size_t b = j; b < end; ++b) {
                                 const std::size_t w = std::size_t(sorted[b].second);
                                 const double d2 = (P[w] - P[v]).squaredNorm();
-                                if (d2 < out[v] && normal[w].dot(normal[v]) < 0) out[v] = d2;
+                                if (d2 < nearest[v] && normal[w].dot(normal[v]) < 0) nearest[v] = d2, out[v] = std::int32_t(w);
                             }
                         }
                     }
@@ -381,7 +381,6 @@ std::vector<double> clearance(const std::vector<Eigen::Vector3d>& P, const std::
             started = true;
         }
     });
-    for (auto& d : out) d = d < radius * radius ? std::sqrt(d) : std::numeric_limits<double>::infinity();
     return out;
 }
 
@@ -491,21 +490,12 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
     auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return snapped[std::size_t(i)] ? target[std::size_t(i)] : P[std::size_t(i)]; };
     const double tiny = 1e-4 * options.voxel_size * options.voxel_size;
     const std::vector<Eigen::Vector3d> normal = vertex_normals(output); // as extracted
-    {
-        // Move at most a third of the way from any corner of a face around the vertex to the other sheet (a face
-        // turns with its vertex, and its other sheet's faces may come a third of the way back).
-        const std::vector<double> own = clearance(P, normal, 1.5 * options.voxel_size);
-        std::vector<double> room = own;
-        for (const auto& t : checks) {
-            const double least = std::min({own[std::size_t(t[0])], own[std::size_t(t[1])], own[std::size_t(t[2])]});
-            for (auto i : t) room[std::size_t(i)] = std::min(room[std::size_t(i)], least);
-        }
-        for (std::size_t v = 0; v < n; ++v)
-            if (snapped[v] && (target[v] - P[v]).norm() > room[v] / 3) snapped[v] = 0;
-    }
+    // The far side of a thin wall or gap: each vertex's nearest vertex of another sheet, and the side of that sheet
+    // (its tangent plane there) the vertex is on.
+    const std::vector<std::int32_t> partner = snap_internal::other_sheet(P, normal, 1.5 * options.voxel_size);
     // Anchors: a tip or thin edge that the voxmap rounds off has no output vertex whose source lies on it, and a
     // move's target there was missed by most of a voxel (the bunny's ear tip: 0.83). The vertex nearest the
-    // anchor's image, where the snap puts it, goes onto the image; the fold checks below still apply.
+    // anchor's image goes onto the image; the fold checks below still apply.
     std::vector<char> anchored(n, 0);
     for (const auto& a : options.anchors) {
         const Eigen::Vector3d image = push_forward(steps, a);
@@ -513,22 +503,23 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
         std::size_t best = n;
         double nearest = options.anchor_reach_voxels * options.voxel_size;
         for (std::size_t v = 0; v < n; ++v) {
-            const double d = (at(std::int32_t(v)) - image).norm();
+            const double d = (P[v] - image).norm();
             if (in_face[v] && d < nearest) nearest = d, best = v;
         }
         if (best == n || anchored[best]) continue;
         // The pull fades over the anchor reach (or three times the pull) around the vertex, flat at first, so that
         // the faces near it move with it and those farther out turn a little each, rather than a few folding (a
         // thin tip's faces stand steep to each other). Only the vertex's own sheet follows, not the far side of a
-        // thin part.
-        const Eigen::Vector3d from = at(std::int32_t(best)), pull = image - from;
+        // thin part. The pull moves the surface as extracted, not as snapped: on a thin tip both sheets snap onto
+        // the input's sharper tip, and the pull on top of that folded the bunny's ear.
+        const Eigen::Vector3d from = P[best], pull = image - from;
         const double reach = std::max(options.anchor_reach_voxels * options.voxel_size, 3 * pull.norm());
         std::vector<std::pair<std::size_t, Eigen::Vector3d>> moves;
         for (std::size_t v = 0; v < n; ++v) {
             const double d = (P[v] - P[best]).norm();
             if (!in_face[v] || anchored[v] || d >= reach || normal[v].dot(normal[best]) <= 0) continue;
             const double w = (1 - (d / reach) * (d / reach)) * (1 - (d / reach) * (d / reach));
-            moves.push_back({v, at(std::int32_t(v)) + w * pull});
+            moves.push_back({v, P[v] + w * pull});
         }
         for (const auto& [v, p] : moves) target[v] = p, snapped[v] = 1, anchored[v] = 1;
     }
@@ -544,10 +535,15 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
             if (after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0) return true;
         return false;
     };
-    // Put back the snapped corners of every face that fails, until none does (each pass puts back at least one
-    // vertex, and a face with no snapped corner cannot fail). Only a face with a corner put back in the last pass
-    // can fail anew, so later passes look at those alone. Failures are rare: a few short passes.
+    // Put back the snapped corners of every face that fails, and of every pair of sheets that would cross, until
+    // none does (each pass puts back at least one vertex, and a face or pair with no snapped vertex cannot fail).
+    // Only a face or pair with a vertex put back in the last pass can fail anew, so later passes look at those
+    // alone. Failures are rare: a few short passes.
     std::vector<char> changed;
+    const auto concat = [](std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
+        a.insert(a.end(), b.begin(), b.end());
+        return a;
+    };
     for (;;) {
         std::vector<std::int32_t> put_back = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::int32_t>(),
@@ -555,16 +551,37 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
                 for (std::size_t f = r.begin(); f != r.end(); ++f) {
                     const auto& t = checks[f];
                     if (!changed.empty() && !changed[std::size_t(t[0])] && !changed[std::size_t(t[1])] && !changed[std::size_t(t[2])]) continue;
-                    if (fails(t))
-                        for (auto i : t)
-                            if (snapped[std::size_t(i)]) found.push_back(i);
+                    if (!fails(t)) continue;
+                    // An anchor carries the user's target: its face's other snapped corners go back first.
+                    const bool others = std::any_of(t.begin(), t.end(), [&](auto i) { return snapped[std::size_t(i)] && !anchored[std::size_t(i)]; });
+                    for (auto i : t)
+                        if (snapped[std::size_t(i)] && !(others && anchored[std::size_t(i)])) found.push_back(i);
                 }
                 return found;
             },
-            [](std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
-                a.insert(a.end(), b.begin(), b.end());
-                return a;
-            });
+            concat);
+        // A vertex stays on its side of the other sheet's tangent plane, at least a third of the gap extracted or a
+        // twentieth of a voxel from it, wherever both end up: both sides of a thin wall or gap snap onto the input's
+        // two sides (the scan's shell at 64: walls a voxel thick all over), but one that snaps alone, or onto the
+        // wrong side, could cross the other. An anchor's pull is along its tip, where the sheets meet: the fold
+        // checks alone judge it.
+        const std::vector<std::int32_t> crossing = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, n, 4096), std::vector<std::int32_t>(),
+            [&](const auto& r, std::vector<std::int32_t> found) {
+                for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                    const std::int32_t u = partner[v];
+                    if (u < 0 || !(snapped[v] || snapped[std::size_t(u)]) || anchored[v] || anchored[std::size_t(u)]) continue;
+                    if (!changed.empty() && !changed[v] && !changed[std::size_t(u)]) continue;
+                    const Eigen::Vector3d m = normal[std::size_t(u)].normalized();
+                    const double before = (P[v] - P[std::size_t(u)]).dot(m), after = (at(std::int32_t(v)) - at(u)).dot(m);
+                    if ((before < 0 ? -after : after) >= std::min(std::abs(before) / 3, 0.05 * options.voxel_size)) continue;
+                    for (const std::size_t i : {v, std::size_t(u)})
+                        if (snapped[i]) found.push_back(std::int32_t(i));
+                }
+                return found;
+            },
+            concat);
+        put_back.insert(put_back.end(), crossing.begin(), crossing.end());
         if (put_back.empty()) break;
         changed.assign(n, 0);
         for (auto i : put_back) snapped[std::size_t(i)] = 0, changed[std::size_t(i)] = 1;
