@@ -79,7 +79,7 @@ void add_mesh_options(CLI::App* cmd, DeformArgs& a) {
         ->capture_default_str();
     add_mesher_option(cmd, a.options.extract.mesher);
     cmd->add_flag("--no-snap", [&a](std::int64_t) { a.options.snap = false; },
-                  "Leave output vertices where extraction puts them (by default each moves onto the exact image of its source point on the input, when that moves it at most half a voxel and flips no face; and the vertex nearest each move's target, within 1.5 voxels, onto the target)");
+                  "Leave output vertices where extraction puts them (by default each moves onto the exact image of its source point on the input, when that moves it at most half a voxel and flips no face; the vertex nearest each move's target, within 1.5 voxels, onto the target; and edges that cut under a crease of the input split on it)");
     cmd->add_option("--adaptivity", a.options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     auto* quads = cmd->add_flag("--quads", a.options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->add_option("--png", a.png, "Also write a before / after picture (voxwarp render's, headless Chromium)");

@@ -525,8 +525,9 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     if (options.snap && out.face_count() > 0) {
         const auto ts = Clock::now();
         sources = find(out);
-        const SnapReport sr = snap_to_sources(out, mesh, steps, sources, so);
+        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so);
         report.snap = true;
+        report.refined_vertices = sr.refined;
         report.snapped_vertices = sr.snapped;
         report.unsnapped_vertices = sr.unsnapped;
         report.seconds_snap = seconds_since(ts);

@@ -384,6 +384,12 @@ std::vector<std::int32_t> other_sheet(const std::vector<Eigen::Vector3d>& P, con
     return out;
 }
 
+/// Joins the lists of a parallel_reduce.
+std::vector<std::int32_t> concat(std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+}
+
 void check_options(const SnapOptions& options) {
     if (!(options.voxel_size > 0) || !std::isfinite(options.voxel_size))
         throw InvalidInput("snap: voxel size must be positive, got " + std::to_string(options.voxel_size));
@@ -454,8 +460,16 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSu
     return out;
 }
 
-SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
-                           const SnapOptions& options) {
+namespace {
+
+/// What snapping finds out about the output as extracted, which refinement's first round needs again.
+struct Sheets {
+    std::vector<Eigen::Vector3d> normal; ///< vertex_normals
+    std::vector<std::int32_t> partner;   ///< other_sheet within 1.5 voxels
+};
+
+SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
+                const SnapOptions& options, Sheets* keep) {
     check_options(options);
     if (sources.size() != output.vertices.size())
         throw InvalidInput("snap: " + std::to_string(sources.size()) + " source points for " + std::to_string(output.vertices.size()) + " vertices");
@@ -489,10 +503,10 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
     const auto& P = output.vertices;
     auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return snapped[std::size_t(i)] ? target[std::size_t(i)] : P[std::size_t(i)]; };
     const double tiny = 1e-4 * options.voxel_size * options.voxel_size;
-    const std::vector<Eigen::Vector3d> normal = vertex_normals(output); // as extracted
+    std::vector<Eigen::Vector3d> normal = vertex_normals(output); // as extracted
     // The far side of a thin wall or gap: each vertex's nearest vertex of another sheet, and the side of that sheet
     // (its tangent plane there) the vertex is on.
-    const std::vector<std::int32_t> partner = snap_internal::other_sheet(P, normal, 1.5 * options.voxel_size);
+    std::vector<std::int32_t> partner = snap_internal::other_sheet(P, normal, 1.5 * options.voxel_size);
     // Anchors: a tip or thin edge that the voxmap rounds off has no output vertex whose source lies on it, and a
     // move's target there was missed by most of a voxel (the bunny's ear tip: 0.83). The vertex nearest the
     // anchor's image goes onto the image; the fold checks below still apply.
@@ -540,10 +554,6 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
     // Only a face or pair with a vertex put back in the last pass can fail anew, so later passes look at those
     // alone. Failures are rare: a few short passes.
     std::vector<char> changed;
-    const auto concat = [](std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
-        a.insert(a.end(), b.begin(), b.end());
-        return a;
-    };
     for (;;) {
         std::vector<std::int32_t> put_back = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::int32_t>(),
@@ -595,6 +605,246 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
             ++report.unsnapped;
         }
     }
+    if (keep) keep->normal = std::move(normal), keep->partner = std::move(partner);
+    return report;
+}
+
+} // namespace
+
+SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
+                           const SnapOptions& options) {
+    return snap(output, input, steps, sources, options, nullptr);
+}
+
+namespace {
+
+/// A corner of a refined triangle: a vertex of the mesh (>= 0) or the new vertex of split e (-(e + 1)).
+using Corner = std::int32_t;
+
+/// The pieces of triangle (v0, v1, v2) whose edges (v0 v1), (v1 v2), (v2 v0) are split where `split[k]`, as
+/// corners, in the triangle's own orientation: 1, 2, 3 or 4 of them. `middle` gives a split edge's corner and
+/// `length2` the squared length of a diagonal (the shorter one cuts a four-sided piece).
+template <class Middle, class Length2>
+void pieces(const std::array<std::int32_t, 3>& v, const std::array<bool, 3>& split, Middle middle, Length2 length2,
+            std::vector<std::array<Corner, 3>>& out) {
+    const int count = int(split[0]) + int(split[1]) + int(split[2]);
+    if (count == 0) {
+        out.push_back(v);
+    } else if (count == 3) {
+        const Corner m0 = middle(0), m1 = middle(1), m2 = middle(2);
+        out.insert(out.end(), {{v[0], m0, m2}, {v[1], m1, m0}, {v[2], m2, m1}, {m0, m1, m2}});
+    } else if (count == 1) {
+        const int k = split[0] ? 0 : split[1] ? 1 : 2;
+        const Corner a = v[std::size_t(k)], b = v[std::size_t((k + 1) % 3)], c = v[std::size_t((k + 2) % 3)], m = middle(k);
+        out.insert(out.end(), {{a, m, c}, {m, b, c}});
+    } else {
+        const int k = !split[0] ? 0 : !split[1] ? 1 : 2; // the edge left whole: (a b)
+        const Corner a = v[std::size_t(k)], b = v[std::size_t((k + 1) % 3)], c = v[std::size_t((k + 2) % 3)];
+        const Corner bc = middle((k + 1) % 3), ca = middle((k + 2) % 3);
+        out.push_back({bc, c, ca});
+        if (length2(a, bc) <= length2(b, ca)) out.insert(out.end(), {{a, b, bc}, {a, bc, ca}});
+        else out.insert(out.end(), {{a, b, ca}, {b, bc, ca}});
+    }
+}
+
+/// Where faces f and g of the input share an edge, the point of that edge nearest to segment pa pb (pa on f, pb on
+/// g): where the output's edge between them crosses the crease, so that the pieces on either side lie on f and on
+/// g exactly (the straight edges of a box or a low-poly model stay straight). As a source point on f.
+std::optional<SourcePoint> crease_point(const SourceSurface::Impl& surface, std::int32_t f, std::int32_t g, const Eigen::Vector3d& pa, const Eigen::Vector3d& pb) {
+    const auto &A = surface.faces[std::size_t(f)], &B = surface.faces[std::size_t(g)];
+    std::array<std::int32_t, 2> shared{};
+    int count = 0;
+    for (auto i : A)
+        if (std::find(B.begin(), B.end(), i) != B.end() && count < 2) shared[std::size_t(count++)] = i;
+    if (count != 2) return std::nullopt;
+    // Closest points of two segments (Ericson 5.1.9), kept on the shared edge u w.
+    const Eigen::Vector3d u = surface.V[std::size_t(shared[0])], w = surface.V[std::size_t(shared[1])];
+    const Eigen::Vector3d d1 = pb - pa, d2 = w - u, r = pa - u;
+    const double a = d1.squaredNorm(), e = d2.squaredNorm(), c = d1.dot(r), b = d1.dot(d2), fr = d2.dot(r), denominator = a * e - b * b;
+    if (!(e > 0)) return std::nullopt;
+    const double sp = denominator > 1e-12 * a * e ? std::clamp((b * fr - c * e) / denominator, 0.0, 1.0) : 0.5; // along pa pb
+    const double t = std::clamp((b * sp + fr) / e, 0.0, 1.0);
+    SourcePoint s;
+    s.face = f;
+    s.barycentric = snap_internal::closest_barycentric(u + t * d2, surface.V[std::size_t(A[0])], surface.V[std::size_t(A[1])], surface.V[std::size_t(A[2])]);
+    return s;
+}
+
+/// refine_to_sources, its first round with `first` (computed when empty).
+std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
+                 const SnapOptions& options, const RefineOptions& refine, Sheets first) {
+    check_options(options);
+    if (sources.size() != output.vertices.size())
+        throw InvalidInput("refine: " + std::to_string(sources.size()) + " source points for " + std::to_string(output.vertices.size()) + " vertices");
+    if (!output.quads.empty()) return 0;
+    const SourceSurface::Impl& surface = input.impl();
+    const double h = options.voxel_size, reach = options.reach_voxels * h, near = 4 * h;
+    const double chord = refine.chord_voxels * h, max_move = options.max_move_voxels * h, tiny = 1e-4 * h * h;
+    using Key = std::uint64_t; // an edge: its ends, lower first
+    auto key = [](std::int32_t a, std::int32_t b) { return Key(std::uint32_t(std::min(a, b))) << 32 | std::uint32_t(std::max(a, b)); };
+    std::size_t added = 0;
+    for (int round = 0; round < refine.rounds; ++round) {
+        std::vector<Eigen::Vector3d>& P = output.vertices;
+        const auto& T = output.triangles;
+        const std::size_t n = P.size(), F = T.size();
+        if (round > 0 || first.normal.size() != n || first.partner.size() != n) {
+            first.normal = snap_internal::vertex_normals(output);
+            first.partner = snap_internal::other_sheet(P, first.normal, 1.5 * h);
+        }
+        const std::vector<Eigen::Vector3d>& normal = first.normal;
+        const std::vector<std::int32_t>& partner = first.partner;
+        // An edge whose ends' sources lie on faces at an angle may leave the surface at its middle; where the
+        // middle of the two sources lies within half the tolerance of either face's plane, it does not. Thin parts
+        // (another sheet within 1.5 voxels) are left alone: a new vertex there has no partner to keep it apart.
+        auto creased = [&](std::int32_t a, std::int32_t b) {
+            const SourcePoint &sa = sources[std::size_t(a)], &sb = sources[std::size_t(b)];
+            if (sa.face < 0 || sb.face < 0 || sa.face == sb.face || partner[std::size_t(a)] >= 0 || partner[std::size_t(b)] >= 0) return false;
+            const Eigen::Vector3d pa = surface.position(sa), pb = surface.position(sb), m = 0.5 * (pa + pb);
+            return std::min(std::abs((m - pa).dot(surface.normal[std::size_t(sa.face)])), std::abs((m - pb).dot(surface.normal[std::size_t(sb.face)]))) > 0.5 * chord;
+        };
+        // Each such edge (named by its side running from the lower vertex to the higher, in a closed mesh one per
+        // edge) gets a source: on the crease, where its ends' faces share an edge (crease_point); otherwise the
+        // nearest point to the middle of its ends' sources, found as a vertex's source is but without a pullback
+        // (that middle is where the edge's middle comes from, to the map's second order). Fixed blocks, so that
+        // the tree's hint gives the same answers for any thread count.
+        struct Split {
+            Key edge;
+            Eigen::Vector3d at; ///< the exact image of the source point
+            std::array<Eigen::Vector3d, 2> normal; ///< the exact surface's normal there, on either side of a crease
+            SourcePoint source;
+        };
+        constexpr std::size_t kBlock = 1536;
+        const std::size_t blocks = (3 * F + kBlock - 1) / kBlock;
+        std::vector<std::vector<Split>> found(blocks);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const auto& r) {
+            for (std::size_t block = r.begin(); block != r.end(); ++block) {
+                std::optional<snap_internal::Hint> hint;
+                for (std::size_t e = block * kBlock; e != std::min(3 * F, (block + 1) * kBlock); ++e) {
+                    const std::int32_t a = T[e / 3][e % 3], b = T[e / 3][(e % 3 + 1) % 3];
+                    if (a > b || !creased(a, b)) continue;
+                    const SourcePoint &sa = sources[std::size_t(a)], &sb = sources[std::size_t(b)];
+                    const Eigen::Vector3d pa = surface.position(sa), pb = surface.position(sb);
+                    SourcePoint s;
+                    std::int32_t other = -1; // the face across the crease
+                    if (const auto on_crease = crease_point(surface, sa.face, sb.face, pa, pb)) {
+                        s = *on_crease, other = sb.face;
+                    } else {
+                        s = surface.nearest(0.5 * (pa + pb), surface.normal[std::size_t(sa.face)] + surface.normal[std::size_t(sb.face)], reach, hint, near);
+                        if (s.face < 0) continue;
+                    }
+                    const Eigen::Vector3d x = push_forward(steps, surface.position(s));
+                    const double d = (x - 0.5 * (P[std::size_t(a)] + P[std::size_t(b)])).norm();
+                    if (!(d > chord && d <= max_move)) continue;
+                    const Eigen::Vector3d n = push_normal(steps, surface.position(s), surface.normal[std::size_t(s.face)]);
+                    found[block].push_back({key(a, b), x, {n, other < 0 ? n : push_normal(steps, surface.position(s), surface.normal[std::size_t(other)])}, s});
+                }
+            }
+        });
+        std::vector<Split> splits;
+        for (auto& f : found) splits.insert(splits.end(), f.begin(), f.end());
+        if (splits.empty()) break;
+        std::sort(splits.begin(), splits.end(), [](const Split& x, const Split& y) { return x.edge < y.edge; });
+        std::vector<char> touched(n, 0); // an end of a split edge
+        for (const auto& s : splits) touched[s.edge >> 32] = touched[s.edge & 0xffffffffu] = 1;
+        std::vector<char> split(splits.size(), 1);
+        auto split_of = [&](std::int32_t a, std::int32_t b) -> std::int32_t { // index into splits, or -1
+            if (!touched[std::size_t(a)] || !touched[std::size_t(b)]) return -1;
+            const Key k = key(a, b);
+            const auto it = std::lower_bound(splits.begin(), splits.end(), k, [](const Split& x, Key y) { return x.edge < y; });
+            return it != splits.end() && it->edge == k ? std::int32_t(it - splits.begin()) : -1;
+        };
+        // The triangles with a split side, and their sides' splits.
+        using Cut = std::pair<std::int32_t, std::array<std::int32_t, 3>>;
+        std::vector<std::vector<Cut>> cuts((F + kBlock - 1) / kBlock);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cuts.size()), [&](const auto& r) {
+            for (std::size_t block = r.begin(); block != r.end(); ++block)
+                for (std::size_t f = block * kBlock; f != std::min(F, (block + 1) * kBlock); ++f) {
+                    const auto& t = T[f];
+                    if (!touched[std::size_t(t[0])] + !touched[std::size_t(t[1])] + !touched[std::size_t(t[2])] > 1) continue;
+                    const std::array<std::int32_t, 3> s{split_of(t[0], t[1]), split_of(t[1], t[2]), split_of(t[2], t[0])};
+                    if (s[0] >= 0 || s[1] >= 0 || s[2] >= 0) cuts[block].push_back({std::int32_t(f), s});
+                }
+        });
+        std::vector<Cut> cut;
+        for (auto& c : cuts) cut.insert(cut.end(), c.begin(), c.end());
+        auto position = [&](Corner c) -> const Eigen::Vector3d& { return c >= 0 ? P[std::size_t(c)] : splits[std::size_t(-c - 1)].at; };
+        auto pieces_of = [&](const Cut& c, std::vector<std::array<Corner, 3>>& out) {
+            const auto& s = c.second;
+            pieces(
+                T[std::size_t(c.first)], {s[0] >= 0 && split[std::size_t(s[0])], s[1] >= 0 && split[std::size_t(s[1])], s[2] >= 0 && split[std::size_t(s[2])]},
+                [&](int k) { return Corner(-s[std::size_t(k)] - 1); }, [&](Corner a, Corner b) { return (position(a) - position(b)).squaredNorm(); }, out);
+        };
+        // A triangle whose pieces would not all face its way (or the extracted normal at its corners) keeps its
+        // sides whole; that changes only its neighbours' pieces, so repeat until every cut triangle passes.
+        for (;;) {
+            const std::vector<std::int32_t> whole = tbb::parallel_reduce(
+                tbb::blocked_range<std::size_t>(0, cut.size(), 1024), std::vector<std::int32_t>(),
+                [&](const auto& r, std::vector<std::int32_t> keep) {
+                    std::vector<std::array<Corner, 3>> parts;
+                    for (std::size_t c = r.begin(); c != r.end(); ++c) {
+                        const auto& t = T[std::size_t(cut[c].first)];
+                        const auto& s = cut[c].second;
+                        if (!(s[0] >= 0 && split[std::size_t(s[0])]) && !(s[1] >= 0 && split[std::size_t(s[1])]) && !(s[2] >= 0 && split[std::size_t(s[2])])) continue;
+                        const Eigen::Vector3d before = (P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])]);
+                        parts.clear();
+                        pieces_of(cut[c], parts);
+                        const bool folds = std::any_of(parts.begin(), parts.end(), [&](const auto& p) {
+                            const Eigen::Vector3d after = (position(p[1]) - position(p[0])).cross(position(p[2]) - position(p[0]));
+                            if (after.dot(before) <= 0 || after.norm() < tiny) return true;
+                            for (auto i : t)
+                                if (after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0) return true;
+                            for (auto c : p) { // and a split corner's exact normal, on one side of its crease at least
+                                if (c >= 0) continue;
+                                const auto& n = splits[std::size_t(-c - 1)].normal;
+                                if (after.dot(n[0]) <= 0 && after.dot(n[1]) <= 0) return true;
+                            }
+                            return false;
+                        });
+                        if (folds)
+                            for (auto i : s)
+                                if (i >= 0 && split[std::size_t(i)]) keep.push_back(i);
+                    }
+                    return keep;
+                },
+                concat);
+            if (whole.empty()) break;
+            for (auto i : whole) split[std::size_t(i)] = 0;
+        }
+        // New vertices in edge order; each cut triangle's first piece in its place, the others at the end.
+        std::vector<std::int32_t> id(splits.size(), -1);
+        for (std::size_t i = 0; i < splits.size(); ++i)
+            if (split[i]) id[i] = std::int32_t(P.size()), P.push_back(splits[i].at), sources.push_back(splits[i].source);
+        if (P.size() == n) break;
+        added += P.size() - n;
+        output.triangles.reserve(F + 3 * (P.size() - n)); // a split edge adds a piece to each of its two triangles
+        std::vector<std::array<Corner, 3>> parts;
+        for (const auto& c : cut) {
+            parts.clear();
+            pieces_of(c, parts);
+            auto vertex = [&](Corner x) { return x >= 0 ? x : id[std::size_t(-x - 1)]; };
+            for (std::size_t p = 0; p < parts.size(); ++p) {
+                const std::array<std::int32_t, 3> t{vertex(parts[p][0]), vertex(parts[p][1]), vertex(parts[p][2])};
+                if (p == 0) output.triangles[std::size_t(c.first)] = t;
+                else output.triangles.push_back(t);
+            }
+        }
+    }
+    return added;
+}
+
+} // namespace
+
+std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
+                              const SnapOptions& options, const RefineOptions& refine_options) {
+    return refine_with(output, sources, input, steps, options, refine_options, {});
+}
+
+SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps, std::vector<SourcePoint>& sources,
+                           const SnapOptions& options, const RefineOptions& refine_options) {
+    Sheets sheets;
+    SnapReport report = snap(output, input.mesh(), steps, sources, options, &sheets);
+    report.refined = refine_with(output, sources, input, steps, options, refine_options, std::move(sheets));
+    report.snapped += report.refined;
     return report;
 }
 

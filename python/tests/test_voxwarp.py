@@ -154,17 +154,19 @@ def test_deform_reports_like_the_cli():
     assert moves and all(c["surface_miss_voxels"] is not None for c in moves)
     assert report["output_faces"] == len(F2) and report["output_vertices"] == len(V2)
     assert report["snap"] and report["snapped_vertices"] + report["unsnapped_vertices"] == len(V2)
-    # snap=False: the same connectivity, vertices where extraction put them.
+    # snap=False: vertices where extraction put them. Snapped: the same vertices moved, then those refinement put
+    # on edges across the box's edges.
     V3, F3, plain = voxwarp.deform(V, F, data("box_twist.json"), resolution=48, snap=False)
-    assert not plain["snap"] and plain["snapped_vertices"] == 0
-    assert np.array_equal(F2, F3) and not np.array_equal(V2, V3)
+    assert not plain["snap"] and plain["snapped_vertices"] == 0 and plain["refined_vertices"] == 0
+    assert report["refined_vertices"] > 0 and len(V2) == len(V3) + report["refined_vertices"]
+    assert len(F2) > len(F3) and not np.array_equal(V2[: len(V3)], V3)
     # Snapping moves a vertex at most half a voxel, except around a move's target, whose nearest vertex goes onto
     # it (anchors, within 1.5 voxels) with the vertices within three times that pull (at least 1.5 voxels) following.
     h = report["voxel_size"]
     with open(data("box_twist.json")) as f:
         targets = np.array([c["to"] for e in json.load(f)["edits"] for c in e["constraints"] if "to" in c and "move" in c])
     near = (np.linalg.norm(V3[:, None, :] - targets[None, :, :], axis=2) <= 6.0 * h).any(axis=1)
-    moved = np.linalg.norm(V2 - V3, axis=1)
+    moved = np.linalg.norm(V2[: len(V3)] - V3, axis=1)
     assert moved[~near].max() <= 0.5 * h * (1 + 1e-9)
     assert moved.max() <= 2.0 * h * (1 + 1e-9)  # 1.5 voxels of pull beyond a snap of at most half a voxel
     # The corners the edit drags lie on the output (unsnapped, marching cubes rounds them off by 0.9-1.0 voxel).

@@ -86,6 +86,7 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const Triangle
 struct SnapReport {
     std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor)
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
+    std::size_t refined = 0;   ///< snap_and_refine: vertices added on edges across the input's creases (among the snapped)
 };
 
 /// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
@@ -93,5 +94,25 @@ struct SnapReport {
 /// nearest each anchor's image onto it (SnapOptions::anchors). The mesh's connectivity is kept. Parallel (oneTBB).
 SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
                            const SnapOptions& options);
+
+struct RefineOptions {
+    double chord_voxels = 0.05; ///< an edge whose middle lies farther than this from the exact surface is split
+    int rounds = 1;             ///< passes, each splitting the edges the last one made or left (0: none)
+};
+
+/// Where an output edge runs across a crease or bump of the input (its two ends' sources on faces that meet at an
+/// angle), its straight middle misses the exact warped surface: split it there, the new vertex on the exact image
+/// of the middle's own source point (found as find_sources finds a vertex's), unless that is more than
+/// max_move_voxels away or would fold a face. Triangles split 1 to 2, 3 or 4 by their split edges, so the mesh
+/// stays closed and its topology is kept; thin parts (another sheet within 1.5 voxels) are left alone. `sources`
+/// grows with the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on
+/// the thread count. Returns the number of vertices added.
+std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
+                              const SnapOptions& options, const RefineOptions& refine = {});
+
+/// snap_to_sources, then refine_to_sources with what snapping found out about the output's sheets (the deform's
+/// path: refinement then costs its splits alone).
+SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps, std::vector<SourcePoint>& sources,
+                           const SnapOptions& options, const RefineOptions& refine = {});
 
 } // namespace voxwarp
