@@ -1,7 +1,8 @@
 /// @file snap.h
 /// @brief Where each vertex of a re-polygonized mesh came from: its source point on the input surface, found by
 ///        carrying the vertex back through the warps (pullback) and taking the nearest input point whose normal
-///        agrees; and snapping the vertex onto the exact image of that point (pushforward).
+///        agrees; snapping the vertex onto the exact image of that point (pushforward); and refining, splitting
+///        edges that cut under a crease of the input on it.
 ///
 /// Frames: world units throughout. The input lives in the frame before the first warp, the output in the frame after
 /// the last; a WarpStep is one warp's map, from its rest lattice's world to its moved lattice's world.
@@ -84,7 +85,7 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const Triangle
                                       const SnapOptions& options);
 
 struct SnapReport {
-    std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor)
+    std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor; with snap_and_refine, the refined too)
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
     std::size_t refined = 0;   ///< snap_and_refine: vertices added on edges across the input's creases (among the snapped)
 };
@@ -101,9 +102,10 @@ struct RefineOptions {
 };
 
 /// Where an output edge runs across a crease or bump of the input (its two ends' sources on faces that meet at an
-/// angle), its straight middle misses the exact warped surface: split it there, the new vertex on the exact image
-/// of the middle's own source point (found as find_sources finds a vertex's), unless that is more than
-/// max_move_voxels away or would fold a face. Triangles split 1 to 2, 3 or 4 by their split edges, so the mesh
+/// angle), its straight middle misses the exact warped surface: split it, the new vertex on the exact image of a
+/// source point (where the two faces share an edge, the point of that edge nearest the output edge, so the pieces
+/// lie on the faces; otherwise the source of the ends' sources' middle) when the middle misses that by more than
+/// chord_voxels, unless that is more than max_move_voxels or a piece would fold. Triangles split 1 to 2, 3 or 4 by their split edges, so the mesh
 /// stays closed and its topology is kept; thin parts (another sheet within 1.5 voxels) are left alone. `sources`
 /// grows with the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on
 /// the thread count. Returns the number of vertices added.
