@@ -22,7 +22,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 namespace voxwarp {
 
@@ -404,16 +403,28 @@ Eigen::Vector3d push_forward(const std::vector<WarpStep>& steps, Eigen::Vector3d
     return point;
 }
 
-Eigen::Vector3d push_normal(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Vector3d normal) {
+namespace {
+
+/// push_normal for several normals at one point: each step's Jacobians evaluated once for all of them.
+template <std::size_t N>
+std::array<Eigen::Vector3d, N> push_normals(const std::vector<WarpStep>& steps, Eigen::Vector3d point, std::array<Eigen::Vector3d, N> normals) {
     for (const WarpStep& s : steps) {
         const Eigen::Vector3d stu = rest_parameter(s.rest, point);
         Eigen::Matrix3d moved, rest;
         point = s.moved.evaluate(stu, moved);
         s.rest.evaluate(stu, rest);
         // The step's Jacobian is moved rest^-1, so its inverse transpose is moved^-T rest^T.
-        normal = moved.transpose().partialPivLu().solve(rest.transpose() * normal);
+        const auto lu = moved.transpose().partialPivLu();
+        for (auto& normal : normals) normal = lu.solve(rest.transpose() * normal);
     }
-    return normal.norm() > 0 && normal.allFinite() ? Eigen::Vector3d(normal.normalized()) : Eigen::Vector3d::Zero();
+    for (auto& normal : normals) normal = normal.norm() > 0 && normal.allFinite() ? Eigen::Vector3d(normal.normalized()) : Eigen::Vector3d::Zero();
+    return normals;
+}
+
+} // namespace
+
+Eigen::Vector3d push_normal(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Vector3d normal) {
+    return push_normals<1>(steps, point, {normal})[0];
 }
 
 std::optional<Eigen::Vector3d> pull_back(const std::vector<WarpStep>& steps, Eigen::Vector3d point, Eigen::Matrix3d* jacobian) {
@@ -461,6 +472,13 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSu
 }
 
 namespace {
+
+/// Whether a face that turned from `before` to `after` (unnormalized normals) now looks away from the extracted
+/// normal at one of its corners `t` that it looked along before: a fold with its neighbours, which need not flip it.
+bool turns_from_corners(const Eigen::Vector3d& before, const Eigen::Vector3d& after, const std::array<std::int32_t, 3>& t,
+                        const std::vector<Eigen::Vector3d>& normal) {
+    return std::any_of(t.begin(), t.end(), [&](std::int32_t i) { return after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0; });
+}
 
 /// What snapping finds out about the output as extracted, which refinement's first round needs again.
 struct Sheets {
@@ -545,9 +563,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
         const Eigen::Vector3d after = (at(t[1]) - at(t[0])).cross(at(t[2]) - at(t[0]));
         if (before.norm() == 0) return false; // a face that had no area has no side to flip to
         if (after.dot(before) <= 0 || (after.norm() < tiny && after.norm() < 0.1 * before.norm())) return true;
-        for (auto i : t)
-            if (after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0) return true;
-        return false;
+        return turns_from_corners(before, after, t, normal);
     };
     // Put back the snapped corners of every face that fails, and of every pair of sheets that would cross, until
     // none does (each pass puts back at least one vertex, and a face or pair with no snapped vertex cannot fail).
@@ -732,11 +748,11 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                         s = surface.nearest(0.5 * (pa + pb), surface.normal[std::size_t(sa.face)] + surface.normal[std::size_t(sb.face)], reach, hint, near);
                         if (s.face < 0) continue;
                     }
-                    const Eigen::Vector3d x = push_forward(steps, surface.position(s));
+                    const Eigen::Vector3d from = surface.position(s), x = push_forward(steps, from);
                     const double d = (x - 0.5 * (P[std::size_t(a)] + P[std::size_t(b)])).norm();
                     if (!(d > chord && d <= max_move)) continue;
-                    const Eigen::Vector3d n = push_normal(steps, surface.position(s), surface.normal[std::size_t(s.face)]);
-                    found[block].push_back({key(a, b), x, {n, other < 0 ? n : push_normal(steps, surface.position(s), surface.normal[std::size_t(other)])}, s});
+                    const Eigen::Vector3d& n = surface.normal[std::size_t(s.face)];
+                    found[block].push_back({key(a, b), x, push_normals<2>(steps, from, {n, other < 0 ? n : surface.normal[std::size_t(other)]}), s});
                 }
             }
         });
@@ -768,11 +784,12 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         std::vector<Cut> cut;
         for (auto& c : cuts) cut.insert(cut.end(), c.begin(), c.end());
         auto position = [&](Corner c) -> const Eigen::Vector3d& { return c >= 0 ? P[std::size_t(c)] : splits[std::size_t(-c - 1)].at; };
+        auto on = [&](std::int32_t i) { return i >= 0 && split[std::size_t(i)]; }; // a side's split, not undone
         auto pieces_of = [&](const Cut& c, std::vector<std::array<Corner, 3>>& out) {
             const auto& s = c.second;
             pieces(
-                T[std::size_t(c.first)], {s[0] >= 0 && split[std::size_t(s[0])], s[1] >= 0 && split[std::size_t(s[1])], s[2] >= 0 && split[std::size_t(s[2])]},
-                [&](int k) { return Corner(-s[std::size_t(k)] - 1); }, [&](Corner a, Corner b) { return (position(a) - position(b)).squaredNorm(); }, out);
+                T[std::size_t(c.first)], {on(s[0]), on(s[1]), on(s[2])}, [&](int k) { return Corner(-s[std::size_t(k)] - 1); },
+                [&](Corner a, Corner b) { return (position(a) - position(b)).squaredNorm(); }, out);
         };
         // A triangle whose pieces would not all face its way (or the extracted normal at its corners) keeps its
         // sides whole; that changes only its neighbours' pieces, so repeat until every cut triangle passes.
@@ -784,15 +801,13 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                     for (std::size_t c = r.begin(); c != r.end(); ++c) {
                         const auto& t = T[std::size_t(cut[c].first)];
                         const auto& s = cut[c].second;
-                        if (!(s[0] >= 0 && split[std::size_t(s[0])]) && !(s[1] >= 0 && split[std::size_t(s[1])]) && !(s[2] >= 0 && split[std::size_t(s[2])])) continue;
+                        if (!on(s[0]) && !on(s[1]) && !on(s[2])) continue;
                         const Eigen::Vector3d before = (P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])]);
                         parts.clear();
                         pieces_of(cut[c], parts);
                         const bool folds = std::any_of(parts.begin(), parts.end(), [&](const auto& p) {
                             const Eigen::Vector3d after = (position(p[1]) - position(p[0])).cross(position(p[2]) - position(p[0]));
-                            if (after.dot(before) <= 0 || after.norm() < tiny) return true;
-                            for (auto i : t)
-                                if (after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0) return true;
+                            if (after.dot(before) <= 0 || after.norm() < tiny || turns_from_corners(before, after, t, normal)) return true;
                             for (auto c : p) { // and a split corner's exact normal, on one side of its crease at least
                                 if (c >= 0) continue;
                                 const auto& n = splits[std::size_t(-c - 1)].normal;
@@ -802,7 +817,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                         });
                         if (folds)
                             for (auto i : s)
-                                if (i >= 0 && split[std::size_t(i)]) keep.push_back(i);
+                                if (on(i)) keep.push_back(i);
                     }
                     return keep;
                 },
