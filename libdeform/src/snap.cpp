@@ -22,6 +22,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace voxwarp {
 
@@ -473,6 +474,10 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSu
 
 namespace {
 
+/// Voxels: the least a snapped vertex keeps from the other sheet's plane, and the gap under which sheets count as
+/// touching (snap).
+constexpr double kSheetMargin = 0.05;
+
 /// Whether a face that turned from `before` to `after` (unnormalized normals) now looks away from the extracted
 /// normal at one of its corners `t` that it looked along before: a fold with its neighbours, which need not flip it.
 bool turns_from_corners(const Eigen::Vector3d& before, const Eigen::Vector3d& after, const std::array<std::int32_t, 3>& t,
@@ -525,6 +530,23 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
     // The far side of a thin wall or gap: each vertex's nearest vertex of another sheet, and the side of that sheet
     // (its tangent plane there) the vertex is on.
     std::vector<std::int32_t> partner = snap_internal::other_sheet(P, normal, 1.5 * options.voxel_size);
+    // Where the extracted sheets all but touch (the thin-part carry leaves them hundredths of a voxel apart), the
+    // pair check below, which keeps a twentieth of a voxel between a vertex and its own partner's plane, is coarser
+    // than the gap: there a vertex moves at most a third of the way to the other sheet of any corner of a face
+    // around it. With the pair check alone the scan's output, edited again at 96, pushed two vertices 0.19 and
+    // 0.14 voxel through faces whose vertices' partners held them.
+    const double touching = kSheetMargin * options.voxel_size;
+    {
+        std::vector<double> room(n, std::numeric_limits<double>::infinity());
+        for (const auto& t : checks) {
+            double least = std::numeric_limits<double>::infinity();
+            for (auto i : t)
+                if (partner[std::size_t(i)] >= 0) least = std::min(least, (P[std::size_t(i)] - P[std::size_t(partner[std::size_t(i)])]).norm());
+            for (auto i : t) room[std::size_t(i)] = std::min(room[std::size_t(i)], least);
+        }
+        for (std::size_t v = 0; v < n; ++v)
+            if (snapped[v] && room[v] < touching && (target[v] - P[v]).norm() > room[v] / 3) snapped[v] = 0;
+    }
     // Anchors: a tip or thin edge that the voxmap rounds off has no output vertex whose source lies on it, and a
     // move's target there was missed by most of a voxel (the bunny's ear tip: 0.83). The vertex nearest the
     // anchor's image goes onto the image; the fold checks below still apply.
@@ -600,7 +622,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
                     if (!changed.empty() && !changed[v] && !changed[std::size_t(u)]) continue;
                     const Eigen::Vector3d m = normal[std::size_t(u)].normalized();
                     const double before = (P[v] - P[std::size_t(u)]).dot(m), after = (at(std::int32_t(v)) - at(u)).dot(m);
-                    if ((before < 0 ? -after : after) >= std::min(std::abs(before) / 3, 0.05 * options.voxel_size)) continue;
+                    if ((before < 0 ? -after : after) >= std::min(std::abs(before) / 3, touching)) continue;
                     for (const std::size_t i : {v, std::size_t(u)})
                         if (snapped[i]) found.push_back(std::int32_t(i));
                 }
