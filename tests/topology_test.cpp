@@ -79,6 +79,34 @@ TEST(KeepsTopology, ScansOpenMeshesThinShellsAndItsOwnOutputs) {
     }
 }
 
+TEST(KeepsTopology, AFlatRingPulledOutByAQuarterOfItsSize) {
+    // A ring 4.16 across and 0.16 thick, a point of its rim pulled out 1.04 (a quarter of its size), the opposite
+    // point pinned. Fitted to the ring, the lattice's regions were 0.04 along its thickness and 1.04 across: the
+    // move sheared the tube into a ribbon under a voxel thick, 9 extra handles at 128 and 8 pieces at 192. With
+    // regions at most twice as long one way as another, the tube bends as a tube.
+    const TriangleMesh ring = test::torus_mesh({0, 0, 0}, 2.0, 0.08, 96, 16);
+    EditScript script;
+    script.edits.push_back({{constraint(ConstraintKind::move, {2.08, 0, 0}, {3.12, 0, 0}), constraint(ConstraintKind::pin, {-2.08, 0, 0}, {-2.08, 0, 0})}});
+    for (const int resolution : {128, 192}) {
+        SCOPED_TRACE("at " + std::to_string(resolution));
+        DeformOptions options;
+        options.voxelize.resolution = resolution;
+        DeformReport report, exact_report;
+        const TriangleMesh out = deform_mesh(ring, script, options, report);
+        const MeshTopology t = topology(out);
+        EXPECT_TRUE(t.watertight());
+        EXPECT_EQ(t.components, 1);
+        EXPECT_EQ(t.euler, 0);
+        // Against the exact warp (the map applied to a finely subdivided ring): nowhere a hole or a lost part.
+        const double h = report.voxel_size;
+        const TriangleMesh exact = deform_vertices(test::subdivided(ring, h), script, options, exact_report);
+        const DistanceStats d = one_sided_distance(exact, out);
+        std::printf("flat ring at %d: %lld pieces, Euler %lld; exact warp to output p99 %.3f, max %.3f voxel\n", resolution, (long long)t.components,
+                    (long long)t.euler, d.p99 / h, d.max / h);
+        EXPECT_LE(d.max / h, 1.0);
+    }
+}
+
 /// data/snowden_nose.json on `mesh` at `resolution` (unsnapped) keeps the topology of `mesh`'s round trip with
 /// `sign`.
 void expect_nose_edit_keeps_topology(const TriangleMesh& mesh, int resolution, SignMethod sign) {

@@ -9,11 +9,15 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace voxwarp {
 
 namespace {
+
+/// Uniform placement: the most one region's side may exceed another's (see make_domain).
+constexpr int kRegionAspect = 2;
 
 void check_spec(const LatticeSpec& spec) {
     if (!(spec.padding >= 0 && spec.padding <= 4)) throw InvalidInput("lattice padding " + std::to_string(spec.padding) + " is outside [0, 4]");
@@ -48,6 +52,18 @@ WarpDomain make_domain(SparseVoxmap input, const LatticeSpec& spec, std::uint64_
             const std::int64_t wanted = input.dims()[a] + 2 * pad;
             d.granularity[a] = int((wanted + regions - 1) / regions);
             dims[a] = std::int64_t(d.granularity[a]) * regions;
+            offset[a] = (dims[a] - input.dims()[a]) / 2;
+        }
+        // A flat model (a ring, a plate, a leaf) fits a lattice whose regions along its thin axis are a fraction of
+        // the others': a move then shears it through its thickness, its top carried a region's length while its
+        // bottom stays (a thin ring pulled out by a quarter of its size came out a ribbon under a voxel thick, its
+        // surface full of holes: 9 extra handles). So no region is more than kRegionAspect times longer along one
+        // axis than along another; the lattice reaches further beyond the thin axis instead (the padding is empty
+        // and never stored).
+        const int longest = *std::max_element(d.granularity.begin(), d.granularity.end());
+        for (std::size_t a = 0; a < 3; ++a) {
+            d.granularity[a] = std::max(d.granularity[a], (longest + kRegionAspect - 1) / kRegionAspect);
+            dims[a] = std::int64_t(d.granularity[a]) * (spec.size[a] - 3);
             offset[a] = (dims[a] - input.dims()[a]) / 2;
         }
         const Eigen::Vector3d origin = input.origin() - h * Eigen::Vector3d(double(offset[0]), double(offset[1]), double(offset[2]));

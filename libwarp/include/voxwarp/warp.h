@@ -41,6 +41,7 @@ struct LatticeSpec {
     std::array<int, 3> size{9, 9, 9};       ///< control points per axis (>= 4 uniform, >= 6 clamped); the papers' default 9^3
     Placement placement = Placement::uniform;
     double padding = 0.25;                  ///< uniform: the lattice reaches this fraction of the data's extent beyond it on each side
+                                            ///< (further along an axis whose regions would otherwise be under half another's)
 };
 
 /// A domain aligned with a lattice's regions, ready to warp. Domain voxel (e, f, g) sits at parameter
@@ -60,7 +61,8 @@ struct WarpDomain {
 };
 
 /// Build the domain for a voxmap. Uniform placement: a grid of G * (n - 3) voxels per axis aligned with the
-/// input's voxels, the input centred in it (no copy, no resampling: the undeformed warp is the identity).
+/// input's voxels, the input centred in it (no copy, no resampling: the undeformed warp is the identity); G per
+/// axis fits the data and its padding, raised where needed so that no axis's G is under half another's.
 /// Clamped placement: the input is *captured* (pulled back through the undeformed clamped map, paper section 5)
 /// into a domain of about twice the input's resolution per axis.
 /// @throw InvalidInput for an empty voxmap or a bad spec; ResourceLimit when the domain would exceed max_memory_bytes
