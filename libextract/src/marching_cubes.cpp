@@ -105,12 +105,12 @@ struct Block {
     }
 };
 
-/// One block's cells: reports its crossings in bit order (`crossing(bit, point)`), each loop centre it needs
-/// (`centre(point)`, returning its reference) and its triangles (`triangle(a, b, c)`, references), counter-
-/// clockwise seen from outside. Run twice with the same input, it reports the same things in the same order.
 /// Parameter units: how near a crossing may come to either end of its grid edge.
 constexpr double kEdgeMargin = 1e-6;
 
+/// One block's cells: reports its crossings in bit order (`crossing(bit, point)`), each loop centre it needs
+/// (`centre(point)`, returning its reference) and its triangles (`triangle(a, b, c)`, references), counter-
+/// clockwise seen from outside. Run twice with the same input, it reports the same things in the same order.
 template <class Crossing, class Centre, class Triangle>
 void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* g0, Crossing&& crossing, Centre&& centre, Triangle&& triangle) {
     const CellTable& table = cell_table();
@@ -125,7 +125,7 @@ void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* 
         ++high[axis];
         const float a = at(low[0], low[1], low[2]), b = at(high[0], high[1], high[2]);
         Eigen::Vector3d p = voxmap.world(double(g0[0] + low[0]), double(g0[1] + low[1]), double(g0[2] + low[2]));
-        // Kept a thousandth of a voxel inside the edge: a corner at the isovalue itself (where a warp leaves a face
+        // Kept a millionth of a voxel inside the edge: a corner at the isovalue itself (where a warp leaves a face
         // on a plane of voxels) would put the crossings of all its edges on one point, distinct vertices at one
         // position, and triangles with none of their area.
         p[axis] += h * std::clamp(double((isovalue - a) / (b - a)), kEdgeMargin, 1 - kEdgeMargin);
