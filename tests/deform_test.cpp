@@ -218,6 +218,32 @@ TEST(Deform, MissesOffTheModelAreExplained) {
     EXPECT_NE(warnings[0].find("edits[0].constraints[0]: the surface misses the target by"), std::string::npos) << warnings[0];
 }
 
+TEST(Deform, TargetsCloseTogetherPulledApartAreReported) {
+    // Two points a thousandth apart on the sphere, pulled 0.3 either way: the least motion that takes both there
+    // stretches space steeply between them and moves the lattice far more than either target. An ordinary edit
+    // (one move, one pin) moves it about as far as its target.
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 4);
+    DeformOptions options;
+    options.voxelize.resolution = 32;
+    EditScript steep, plain;
+    steep.edits.push_back({{move({1, 0, 0}, {1.3, 0, 0}), move({1, 0.001, 0}, {0.7, 0.001, 0})}});
+    plain.edits.push_back({{move({1, 0, 0}, {1.3, 0, 0}), pin({-1, 0, 0})}});
+    DeformReport steep_report, plain_report;
+    deform_mesh(sphere, steep, options, steep_report);
+    deform_mesh(sphere, plain, options, plain_report);
+    std::printf("control motion over the farthest target's: %.1f (two targets apart), %.2f (one move, one pin)\n",
+                steep_report.edits[0].control_motion_ratio, plain_report.edits[0].control_motion_ratio);
+    EXPECT_GT(steep_report.edits[0].control_motion_ratio, 100);
+    EXPECT_GT(plain_report.edits[0].control_motion_ratio, 0.5);
+    EXPECT_LT(plain_report.edits[0].control_motion_ratio, 5);
+    auto steep_warning = [](const DeformReport& r) {
+        const auto w = deform_warnings(r);
+        return std::any_of(w.begin(), w.end(), [](const std::string& s) { return s.find("edits[0] moves control points up to") != std::string::npos; });
+    };
+    EXPECT_TRUE(steep_warning(steep_report));
+    EXPECT_FALSE(steep_warning(plain_report));
+}
+
 TEST(Deform, PreviewStaysWithinTwoVoxelsOfTheFullWarp) {
     // Map-and-round once sent a needle from a stretched ear to the grid's edge (58 voxels off at 128, a handle).
     struct Case {

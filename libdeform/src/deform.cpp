@@ -244,6 +244,14 @@ void record(EditReport& er, const Lattice& rest, const ConstraintSolution& solut
     er.least_squares = solution.least_squares;
     er.rank = solution.rank;
     er.unknowns = solution.unknowns;
+    // How much further the lattice moves than the user asked: the largest control-point motion over the largest
+    // move's (this step's share of it). Near 1 for an ordinary edit; far above where targets close together go
+    // different ways, and the map then stretches space steeply between them.
+    double asked = 0, moved = 0;
+    for (const Constraint& c : constraints)
+        if (c.kind == ConstraintKind::move) asked = std::max(asked, (c.to - c.point).norm() / steps);
+    for (std::size_t i = 0; i < er.lattice_rest.size() && i < er.lattice_solved.size(); ++i) moved = std::max(moved, (er.lattice_solved[i] - er.lattice_rest[i]).norm());
+    er.control_motion_ratio = asked > 0 ? moved / asked : 0;
     std::vector<double> worst(constraints.size(), 0.0);
     for (std::size_t r = 0; r < owner.size(); ++r) worst[std::size_t(owner[r])] = std::max(worst[std::size_t(owner[r])], solution.residuals[r]);
     const double length = solution.lattice.spacing().mean(); // a turn row's scale (constraint_rows)

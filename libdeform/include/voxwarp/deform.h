@@ -64,6 +64,9 @@ struct EditReport {
     int iterations = 0;              ///< nonlinear solver iterations (rigid, preserve_volume)
     double seconds_solve = 0;
     double volume_before = 0, volume_after = 0; ///< voxmap mass before and after this edit, world units^3
+    /// The largest control-point motion over the largest move's (per step); 0 without moves. Far above 1 (a warning
+    /// past 10) where targets close together go different ways and the map stretches space steeply between them.
+    double control_motion_ratio = 0;
     std::vector<ConstraintReport> constraints;
     /// The edit's lattice (its first step's, when it was split into steps): control points per axis, and their
     /// world positions at rest and as solved, index i + nx (j + ny k). For showing the lattice; not in the JSON report.
