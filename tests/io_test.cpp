@@ -120,6 +120,12 @@ TEST(MeshIO, HeadersClaimingMoreThanTheFileHoldsAreRefused) {
     } catch (const InvalidInput& e) {
         EXPECT_NE(std::string(e.what()).find("declares 1000 triangles"), std::string::npos) << e.what();
     }
+    try { // an ASCII STL without a facet is named as such, not as a binary one too short for its header
+        read_mesh(write("empty.stl", "solid x\nendsolid x\n"));
+        FAIL() << "expected InvalidInput";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("ASCII STL without a facet"), std::string::npos) << e.what();
+    }
     EXPECT_THROW(read_mesh(write("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")), InvalidInput);
     EXPECT_THROW(read_mesh(write("two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n")), InvalidInput);
     EXPECT_THROW(read_mesh(write("negative.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -7\n")), InvalidInput);

@@ -91,7 +91,11 @@ void validate_obj(const std::string& path) {
 void validate_stl(const std::string& path, const std::string& head, std::uintmax_t file_size) {
     const bool ascii = head.rfind("solid", 0) == 0 && head.find("facet") != std::string::npos;
     if (ascii) return;
-    if (file_size < 84) throw InvalidInput(path + ": binary STL shorter than its 84-byte header");
+    if (file_size < 84) {
+        // "solid" with no facet: an ASCII STL without triangles, not a short binary one.
+        if (head.rfind("solid", 0) == 0) throw InvalidInput(path + ": ASCII STL without a facet: no triangles");
+        throw InvalidInput(path + ": binary STL shorter than its 84-byte header");
+    }
     std::uint32_t count = 0;
     std::memcpy(&count, head.data() + 80, 4);
     if (84 + 50 * std::uint64_t(count) != file_size)
