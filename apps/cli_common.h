@@ -8,6 +8,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cmath>
+#include <exception>
 #include <functional>
 #include <string>
 
@@ -42,6 +44,22 @@ auto naming_source(const std::string& source, F&& f) -> decltype(f()) {
         if (std::string(e.what()).rfind(source, 0) == 0) throw;
         throw InvalidInput(source + ": " + e.what());
     }
+}
+
+/// A check for an option that takes a length or size: a finite number above 0 (CLI::PositiveNumber's message
+/// prints the largest double as its range).
+inline CLI::Validator positive_length() {
+    return CLI::Validator(
+        [](const std::string& text) {
+            try {
+                std::size_t used = 0;
+                const double x = std::stod(text, &used);
+                if (used == text.size() && std::isfinite(x) && x > 0) return std::string();
+            } catch (const std::exception&) {
+            }
+            return "expected a number above 0, got " + text;
+        },
+        "POSITIVE");
 }
 
 /// `--mesher mc|features`, read through parse_mesher so the command line, edit server and Python agree.

@@ -89,6 +89,13 @@ TEST_F(Cli, ExitCodesForMissingFilesUsageAndResourceLimits) {
     EXPECT_EQ(run("voxelize " + file("missing.obj") + " -o " + file("x.vdb")).code, 5);
     EXPECT_EQ(run("deform " + test::data_path("bunny.obj")).code, 1);
     EXPECT_EQ(run("voxelize " + test::data_path("bunny.obj") + " -o " + file("x.vdb") + " --resolution 100000").code, 2);
+    // A voxel size of 0 once meant "use --resolution" without a word.
+    for (const std::string size : {"0", "-1", "abc"}) {
+        const Outcome zero = run("deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -o " + file("x.obj") + " --voxel-size " + size);
+        EXPECT_EQ(zero.code, 1) << size;
+        EXPECT_NE(zero.err.find("--voxel-size: expected a number above 0, got " + size), std::string::npos) << zero.err;
+    }
+    EXPECT_EQ(run("voxelize " + test::data_path("bunny.obj") + " -o " + file("x.vdb") + " --voxel-size 0").code, 1);
     const Outcome big = run("voxelize " + test::data_path("bunny.obj") + " -o " + file("x.vdb") + " --resolution 4000 --max-memory 0.5");
     EXPECT_EQ(big.code, 3);
     EXPECT_NE(big.err.find("needs about"), std::string::npos) << big.err;
