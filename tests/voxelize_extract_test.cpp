@@ -627,6 +627,15 @@ TEST(Voxelize, AutoSignGivesUpAFloodFillThatLeaksOrLosesWalls) {
         EXPECT_EQ(a.components, w.components) << resolution;
         EXPECT_EQ(a.euler, w.euler) << resolution;
     }
+    // A sphere wound inside out: flood fill has every side wrong, the note says why, winding numbers give the ball.
+    {
+        const TriangleMesh inside_out = test::inverted(test::sphere_mesh({0, 0, 0}, 1.0, 3));
+        const MeshTopology t = topology(extract(voxelize(inside_out, {.resolution = 32, .report = &done})));
+        EXPECT_EQ(done.sign, SignMethod::winding_number);
+        EXPECT_NE(done.note.find("at 100 % of surface samples (the faces are wound inward)"), std::string::npos) << done.note;
+        EXPECT_EQ(t.components, 1);
+        EXPECT_EQ(t.euler, 2);
+    }
     // Clean solids keep the flood fill: smooth (the bunny) and sharp (a turned box).
     for (const char* name : {"bunny.obj", "box.obj"}) {
         TriangleMesh mesh = read_mesh(test::data_path(name));

@@ -636,9 +636,9 @@ bool flood_fill_fails(const TriangleMesh& mesh, const openvdb::FloatGrid& level_
     const double misses = flood_fill_misses(mesh, level_set);
     if (!(misses > 0.0025)) return false;
     char text[200];
-    std::snprintf(text, sizeof text,
-                  "flood fill put the two sides of the surface wrong at %.2g %% of surface samples (a leak, or walls under half a voxel): used winding numbers",
-                  100 * misses);
+    // Nearly everywhere wrong is a mesh wound inside out, which the winding number's sign takes care of.
+    std::snprintf(text, sizeof text, "flood fill put the two sides of the surface wrong at %.3g %% of surface samples (%s): used winding numbers", 100 * misses,
+                  misses > 0.9 ? "the faces are wound inward" : "a leak, walls under half a voxel, or faces inside the solid");
     why = text;
     return true;
 }
