@@ -68,7 +68,8 @@ inline CLI::Option* add_mesher_option(CLI::App* cmd, Mesher& mesher) {
         ->add_option_function<std::string>(
             "--mesher", [&mesher](const std::string& name) { mesher = parse_mesher(name); },
             "mc: marching cubes (smooth, fast); features: sharp edges and corners put back (Extended Marching Cubes; "
-            "the input's own sharp edges kept; a deformed mesh without any comes out as with mc)")
+            "the input's own sharp edges kept; a deformed mesh without any comes out as with mc; its output can cross itself near "
+            "sharp edges, mc's never does)")
         ->check([](const std::string& name) {
             try {
                 parse_mesher(name);
