@@ -51,8 +51,6 @@ WarpDomain make_domain(SparseVoxmap input, const LatticeSpec& spec, std::uint64_
             const std::int64_t pad = std::int64_t(std::ceil(spec.padding * double(input.dims()[a])));
             const std::int64_t wanted = input.dims()[a] + 2 * pad;
             d.granularity[a] = int((wanted + regions - 1) / regions);
-            dims[a] = std::int64_t(d.granularity[a]) * regions;
-            offset[a] = (dims[a] - input.dims()[a]) / 2;
         }
         // A flat model (a ring, a plate, a leaf) fits a lattice whose regions along its thin axis are a fraction of
         // the others': a move then shears it through its thickness, its top carried a region's length while its
