@@ -46,9 +46,9 @@ auto naming_source(const std::string& source, F&& f) -> decltype(f()) {
     }
 }
 
-/// A check for an option that takes a length or size: a finite number above 0 (CLI::PositiveNumber's message
-/// prints the largest double as its range).
-inline CLI::Validator positive_length() {
+/// A check for an option that takes a finite number above 0 (a length, a memory limit): CLI::PositiveNumber's
+/// message prints the largest double as its range.
+inline CLI::Validator positive_number() {
     return CLI::Validator(
         [](const std::string& text) {
             try {

@@ -43,7 +43,7 @@ void add_compare(CLI::App& app, Global&, Action& action) {
     auto* cmd = app.add_subcommand("compare", "Compare two meshes: symmetric surface distance (mean, p99, max), topology, volume, creases");
     cmd->add_option("a", args->a, "First mesh")->required();
     cmd->add_option("b", args->b, "Second mesh")->required();
-    cmd->add_option("--voxel", args->voxel, "Voxel size: also report distances in voxels")->check(CLI::PositiveNumber);
+    cmd->add_option("--voxel", args->voxel, "Voxel size: also report distances in voxels")->check(positive_number());
     cmd->add_option("--crease", args->crease, "Dihedral angle (degrees) above which an edge counts as a crease")->capture_default_str()->check(CLI::Range(0.0, 180.0));
     cmd->add_option("--samples", args->samples, "Area samples per mesh for the distance, besides the vertices")->capture_default_str();
     cmd->add_flag("--json", args->json, "Print JSON instead of text");

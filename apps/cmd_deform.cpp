@@ -73,7 +73,7 @@ namespace {
 /// The options deform and remesh share: how the mesh becomes a voxmap and the voxmap a mesh again.
 void add_mesh_options(CLI::App* cmd, DeformArgs& a) {
     auto* res = cmd->add_option("-r,--resolution", a.options.voxelize.resolution, "Voxels along the mesh's longest side")->capture_default_str();
-    cmd->add_option("--voxel-size", a.options.voxelize.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res)->check(positive_length());
+    cmd->add_option("--voxel-size", a.options.voxelize.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res)->check(positive_number());
     cmd->add_option("--sign", a.sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
         ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
         ->capture_default_str();

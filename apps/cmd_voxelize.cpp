@@ -20,7 +20,7 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("-o,--output", args->output, "Output .vdb file")->required();
     auto* res = cmd->add_option("-r,--resolution", args->options.resolution, "Voxels along the mesh's longest side")
                     ->capture_default_str();
-    cmd->add_option("--voxel-size", args->options.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res)->check(positive_length());
+    cmd->add_option("--voxel-size", args->options.voxel_size, "Voxel size in world units (instead of --resolution)")->excludes(res)->check(positive_number());
     cmd->add_option("--padding", args->options.padding_voxels, "Empty voxels around the mesh")->capture_default_str();
     cmd->add_option("--sign", args->sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
         ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
