@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <cstdint>
 #include <exception>
 #include <functional>
 #include <string>
@@ -60,6 +61,18 @@ inline CLI::Validator positive_number() {
             return "expected a number above 0, got " + text;
         },
         "POSITIVE");
+}
+
+/// `--max-memory GIB` (a number above 0; unset: 0, the library's default of 90 % of free memory) on `cmd`.
+inline CLI::Option* add_max_memory(CLI::App* cmd, double& gib) {
+    return cmd->add_option("--max-memory", gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)")->check(positive_number());
+}
+
+/// A GiB count as a byte count for VoxelizeOptions::max_memory_bytes: 0 stays 0 (the default), a count past what
+/// 64 bits hold is the largest.
+inline std::uint64_t gib_to_bytes(double gib) {
+    const double bytes = gib * double(1ull << 30);
+    return bytes >= 18446744073709551615.0 ? ~std::uint64_t(0) : std::uint64_t(bytes);
 }
 
 /// `--mesher mc|features`, read through parse_mesher so the command line, edit server and Python agree.

@@ -33,7 +33,7 @@ void add_common_options(CLI::App* cmd, DeformArgs& a, bool mesh_input) {
         ->check(CLI::Range(1, 64))
         ->capture_default_str();
     cmd->add_option("--report", a.report, "Write a JSON report: residuals, steps, volumes, timings, peak memory");
-    cmd->add_option("--max-memory", a.max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
+    add_max_memory(cmd, a.max_memory_gib);
 }
 
 /// Run a deform job: messages about a constraint (they start with its JSON path, "edits[...") name the edit
@@ -79,7 +79,7 @@ void add_mesh_options(CLI::App* cmd, DeformArgs& a) {
         ->capture_default_str();
     add_mesher_option(cmd, a.options.extract.mesher);
     cmd->add_flag("--no-snap", [&a](std::int64_t) { a.options.snap = false; },
-                  "Leave output vertices where extraction puts them (by default each moves onto the exact image of its source point on the input, when that moves it at most half a voxel and flips no face; the vertex nearest each move's target, within 1.5 voxels, onto the target; and edges that cut under a crease of the input split on it)");
+                  "Leave output vertices where extraction puts them (by default each moves onto the exact image of its source point on the input, when that moves it at most half a voxel (an image up to a voxel away: half a voxel toward it) and flips no face; the vertex nearest each move's target, within 1.5 voxels, onto the target; and edges that cut under a crease of the input split on it)");
     cmd->add_option("--adaptivity", a.options.extract.adaptivity, "OpenVDB adaptivity in [0, 1]: fewer faces in flat areas (meshes with OpenVDB's VolumeToMesh instead of marching cubes)")->capture_default_str();
     auto* quads = cmd->add_flag("--quads", a.options.extract.quads, "Quads instead of triangles (meshes with OpenVDB's VolumeToMesh instead of marching cubes)");
     cmd->add_option("--png", a.png, "Also write a before / after picture (voxwarp render's, headless Chromium)");
@@ -115,7 +115,7 @@ void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script,
 void check_paths(DeformArgs& a, const Global& global) {
     if (!is_mesh_path(a.output)) throw InvalidInput(a.output + ": unknown mesh format, expected .obj, .off, .ply, .stl, .om, .gltf or .glb");
     if (!a.png.empty() && std::filesystem::path(a.png).extension() != ".png") throw InvalidInput(a.png + ": expected a .png picture");
-    a.options.voxelize.max_memory_bytes = std::uint64_t(a.max_memory_gib * double(1ull << 30));
+    a.options.voxelize.max_memory_bytes = gib_to_bytes(a.max_memory_gib);
     a.options.voxelize.sign = parse_sign(a.sign);
     a.options.progress = stderr_progress(global);
 }
@@ -145,7 +145,7 @@ void add_remesh(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("input", a->input, "Input mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("-o,--output", a->output, "Output mesh (.obj .off .ply .stl .om .gltf .glb)")->required();
     cmd->add_option("--report", a->report, "Write a JSON report: volumes, timings, peak memory, snapped vertices");
-    cmd->add_option("--max-memory", a->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
+    add_max_memory(cmd, a->max_memory_gib);
     add_mesh_options(cmd, *a);
     cmd->callback([a, &global, &action] {
         action = [a, &global] {
@@ -163,7 +163,7 @@ void add_warp(CLI::App& app, Global& global, Action& action) {
     cmd->callback([a, &global, &action] {
         action = [a, &global] {
             const auto start = Clock::now();
-            a->options.voxelize.max_memory_bytes = std::uint64_t(a->max_memory_gib * double(1ull << 30));
+            a->options.voxelize.max_memory_bytes = gib_to_bytes(a->max_memory_gib);
             a->options.progress = stderr_progress(global);
             const EditScript script = read_edit_file(a->edits);
             DeformReport report;

@@ -59,7 +59,7 @@ public:
     static DeformOptions options(const EditArgs& args) {
         DeformOptions o;
         o.voxelize.resolution = args.resolution;
-        o.voxelize.max_memory_bytes = std::uint64_t(args.max_memory_gib * double(1ull << 30));
+        o.voxelize.max_memory_bytes = gib_to_bytes(args.max_memory_gib);
         return o;
     }
 
@@ -177,7 +177,7 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("--max-seconds", a->max_seconds, "Longest a deform request may take")->check(CLI::Range(1, 3600))->capture_default_str();
     cmd->add_option("--max-resolution", a->max_resolution, "Highest resolution a request may ask for (default: twice --resolution, at most 1024)")
         ->check(CLI::Range(8, 1024));
-    cmd->add_option("--max-memory", a->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)")->check(positive_number());
+    add_max_memory(cmd, a->max_memory_gib);
     auto* token = cmd->add_option("--token", a->token, "The session's token (letters, digits, - _ . ~; at least 16), for scripts; default: 128 random bits");
     cmd->add_flag("--no-token", a->no_token, "Let /api/ requests in without the token (any local program, and any page you visit, can then use the server)")
         ->excludes(token);

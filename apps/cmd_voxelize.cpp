@@ -25,14 +25,14 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
     cmd->add_option("--sign", args->sign, "Inside/outside test: auto (flood fill for watertight meshes, unless it loses the surface or walls are thinner than a voxel), flood-fill or winding-number")
         ->check(CLI::IsMember({"auto", "flood-fill", "winding-number"}))
         ->capture_default_str();
-    cmd->add_option("--max-memory", args->max_memory_gib, "Refuse requests estimated above this many GiB (default: 90% of free memory)");
+    add_max_memory(cmd, args->max_memory_gib);
     cmd->callback([args, &global, &action] {
         action = [args, &global] {
             auto& o = args->options;
             o.sign = parse_sign(args->sign);
             VoxelizeReport done;
             o.report = &done;
-            o.max_memory_bytes = std::uint64_t(args->max_memory_gib * double(1ull << 30));
+            o.max_memory_bytes = gib_to_bytes(args->max_memory_gib);
             o.progress = stderr_progress(global);
             const TriangleMesh mesh = read_mesh(args->input);
             const SparseVoxmap voxmap = naming_source(args->input, [&] { return voxelize_sparse(mesh, o); });

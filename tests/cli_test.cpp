@@ -96,6 +96,17 @@ TEST_F(Cli, ExitCodesForMissingFilesUsageAndResourceLimits) {
         EXPECT_NE(zero.err.find("--voxel-size: expected a number above 0, got " + size), std::string::npos) << zero.err;
     }
     EXPECT_EQ(run("voxelize " + test::data_path("bunny.obj") + " -o " + file("x.vdb") + " --voxel-size 0").code, 1);
+    // A negative memory limit was cast to an unsigned byte count, and the run went on as if unlimited.
+    for (const std::string& command : {"voxelize " + test::data_path("bunny.obj") + " -o " + file("x.vdb"),
+                                      "deform " + test::data_path("bunny.obj") + " " + test::data_path("bunny_ear.json") + " -o " + file("x.obj"),
+                                      "remesh " + test::data_path("bunny.obj") + " -o " + file("x.obj")})
+        for (const std::string limit : {"0", "-1"}) {
+            const Outcome refused = run(command + " -r 16 --max-memory " + limit);
+            EXPECT_EQ(refused.code, 1) << command << limit;
+            EXPECT_NE(refused.err.find("--max-memory: expected a number above 0, got " + limit), std::string::npos) << refused.err;
+        }
+    EXPECT_FALSE(fs::exists(file("x.vdb")));
+    EXPECT_FALSE(fs::exists(file("x.obj")));
     const Outcome big = run("voxelize " + test::data_path("bunny.obj") + " -o " + file("x.vdb") + " --resolution 4000 --max-memory 0.5");
     EXPECT_EQ(big.code, 3);
     EXPECT_NE(big.err.find("needs about"), std::string::npos) << big.err;
