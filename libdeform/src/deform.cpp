@@ -538,6 +538,7 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
         report.refined_vertices = sr.refined;
         report.snapped_vertices = sr.snapped;
         report.unsnapped_vertices = sr.unsnapped;
+        report.partly_snapped_vertices = sr.partly_snapped;
         report.seconds_snap = seconds_since(ts);
     }
     if (options.target_faces > 0) out = decimate(out, options.target_faces), sources.clear();

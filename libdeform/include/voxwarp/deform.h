@@ -23,7 +23,8 @@ struct DeformOptions {
     bool preview = false;          ///< map-and-round warp (fast, aliased)
     std::size_t target_faces = 0;  ///< > 0: decimate the extracted mesh to about this many faces (CGAL edge collapse)
     /// Move each output vertex onto the exact image of its source point on the input (snap.h), where that moves it
-    /// at most half a voxel and flips no face. Mesh input, volume mode only.
+    /// at most half a voxel and flips no face (half a voxel toward an image up to a voxel away). Mesh input, volume
+    /// mode only.
     bool snap = true;
     /// Carry the input's texture coordinates, colours, materials and groups onto the output (transfer.h; mesh
     /// input, volume mode; --mode vertex keeps them as they are).
@@ -102,6 +103,7 @@ struct DeformReport {
     std::size_t output_vertices = 0, output_faces = 0;
     bool snap = false;                ///< whether output vertices were snapped onto the exact warped input
     std::size_t snapped_vertices = 0, unsnapped_vertices = 0; ///< with snap: vertices moved, and left as extracted
+    std::size_t partly_snapped_vertices = 0; ///< with snap: vertices moved half a voxel toward an image up to a voxel away
     std::size_t refined_vertices = 0; ///< with snap: vertices added on edges across the input's creases (refine_to_sources; among the snapped)
     double seconds_snap = 0;          ///< finding source points and snapping (part of seconds_extract)
     bool attributes = false;          ///< whether the input's texture coordinates, colours or materials were carried (transfer.h)

@@ -86,12 +86,14 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const Triangle
 
 struct SnapReport {
     std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor; with snap_and_refine, the refined too)
+    std::size_t partly_snapped = 0; ///< vertices moved max_move_voxels toward an exact image up to twice that far
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
     std::size_t refined = 0;   ///< snap_and_refine: vertices added on edges across the input's creases (among the snapped)
 };
 
 /// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
-/// max_move_voxels, or a face around it would flip (turn by more than 90 degrees or collapse); and the vertex
+/// max_move_voxels (up to twice that: max_move_voxels toward it, partly_snapped), or a face around it would flip
+/// (turn by more than 90 degrees or collapse); and the vertex
 /// nearest each anchor's image onto it (SnapOptions::anchors). The mesh's connectivity is kept. Parallel (oneTBB).
 SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, const std::vector<WarpStep>& steps, const std::vector<SourcePoint>& sources,
                            const SnapOptions& options);
