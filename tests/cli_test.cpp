@@ -168,7 +168,7 @@ TEST_F(Cli, EveryClassOfBadInputIsRefusedCleanly) {
                         "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n", "header declares 1000000000 vertices"},
         {"billion.off", "OFF\n1000000000 1 0\n0 0 0\n", "header declares 1000000000 vertices"},
         {"lying.stl", lying_stl, "declares 1000 triangles"},
-        {"far.obj", "v 1e12 0 0\nv 1e12 1 0\nv 1e12 0 1\nv 1e12 1 1\nf 1 2 3\nf 2 4 3\nf 1 3 4\nf 1 4 2\n", "float precision"},
+        {"far.obj", "v 1e12 0 0\nv 1e12 1 0\nv 1e12 0 1\nv 1e12 1 1\nf 1 2 3\nf 2 4 3\nf 1 3 4\nf 1 4 2\n", "double precision"},
     };
     for (const auto& [name, content, expected] : cases) {
         const std::string input = write(name, content);

@@ -7,12 +7,14 @@
 #include <voxwarp/mesh_io.h>
 #include <voxwarp/openvdb_baseline.h>
 #include <voxwarp/surface_distance.h>
+#include <voxwarp/vdb_io.h>
 #include <voxwarp/voxelize.h>
 #include <voxwarp/winding_number.h>
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <map>
 #include <numbers>
 #include <numeric>
@@ -54,6 +56,48 @@ TEST(RoundTrip, SphereLandsOnTheAnalyticSurface) {
     EXPECT_NEAR(enclosed_volume(voxmap), exact_volume, 0.01 * exact_volume);
     expect_closed_manifold(out);
     EXPECT_EQ(topology(out).euler, 2);
+}
+
+TEST(RoundTrip, ASphereAtAnyScaleOrDistanceFromTheOrigin) {
+    // OpenVDB takes positions as 32-bit floats and refuses a transform for a voxel under 1.45e-5: a sphere of radius
+    // 1e-4 (a 0.2 mm part in metres) threw OpenVDB's "Non-zero scale values required", and one 1e5 units out (a
+    // georeferenced scan) was refused as below float precision. Voxelizing works in index space now, so each comes
+    // out as the unit sphere does, by either sign method and either mesher path.
+    for (const auto& [scale, offset] : {std::pair{1e-4, 0.0}, std::pair{1e-7, 0.0}, std::pair{1e4, 0.0}, std::pair{1.0, 1e5}, std::pair{1e-3, 1e3}}) {
+        const Eigen::Vector3d c = Eigen::Vector3d(offset, -2 * offset, 0.5 * offset) + scale * Eigen::Vector3d(0.3, -0.2, 0.1);
+        const double R = scale;
+        const TriangleMesh input = test::sphere_mesh(c, R, 5);
+        for (const SignMethod sign : {SignMethod::flood_fill, SignMethod::winding_number}) {
+            const SparseVoxmap voxmap = voxelize_sparse(input, {.resolution = 48, .sign = sign});
+            const double h = voxmap.voxel_size();
+            for (const bool quads : {false, true}) {
+                const TriangleMesh out = extract(voxmap, {.quads = quads}).triangulated();
+                double sum = 0, worst = 0;
+                for (const auto& v : out.vertices) {
+                    const double d = std::abs((v - c).norm() - R) / h;
+                    sum += d, worst = std::max(worst, d);
+                }
+                const std::string what = "scale " + std::to_string(scale) + " offset " + std::to_string(offset) + (quads ? " quads" : "");
+                EXPECT_LE(sum / double(out.vertices.size()), quads ? 0.1 : 0.05) << what;
+                EXPECT_LE(worst, 0.5) << what;
+                const double exact_volume = 4.0 / 3.0 * std::numbers::pi * R * R * R;
+                EXPECT_NEAR(enclosed_volume(out), exact_volume, 0.01 * exact_volume) << what;
+                expect_closed_manifold(out);
+                EXPECT_EQ(topology(out).euler, 2) << what;
+            }
+        }
+    }
+    // A .vdb cannot hold a voxel that small: a clear refusal, not OpenVDB's arithmetic error.
+    const SparseVoxmap tiny = voxelize_sparse(test::sphere_mesh({0, 0, 0}, 1e-4, 3), {.resolution = 16});
+    EXPECT_THROW(write_vdb(tiny, (std::filesystem::temp_directory_path() / "voxwarp_tiny.vdb").string()), InvalidInput);
+}
+
+TEST(RoundTrip, EnclosedVolumeFarFromTheOrigin) {
+    // The tetrahedra summed to the origin cancelled in their sum far from it: a bunny 2e5 units out read 0.2 % off.
+    const TriangleMesh near = test::sphere_mesh({0, 0, 0}, 1.0, 4);
+    TriangleMesh far = near;
+    for (auto& v : far.vertices) v += Eigen::Vector3d(1e5, -2e5, 3e4);
+    EXPECT_NEAR(enclosed_volume(far), enclosed_volume(near), 1e-9 * enclosed_volume(near));
 }
 
 TEST(RoundTrip, TorusKeepsItsHoleAndSurface) {
@@ -568,7 +612,10 @@ TEST(Voxelize, RejectsImpossibleRequests) {
     const TriangleMesh box = test::box_mesh({0, 0, 0}, {1, 1, 1}, 2);
     EXPECT_THROW(voxelize(box, {.resolution = 0}), InvalidInput);
     EXPECT_THROW(voxelize(box, {.voxel_size = -1}), InvalidInput);
-    EXPECT_THROW(voxelize(box, {.voxel_size = 1e-9}), InvalidInput); // below float precision for unit coordinates
+    EXPECT_THROW(voxelize(box, {.voxel_size = 1e-10}), InvalidInput); // more than 2^30 voxels along an axis
+    TriangleMesh far_box = box;
+    for (auto& v : far_box.vertices) v += Eigen::Vector3d::Constant(1e12);
+    EXPECT_THROW(voxelize(far_box, {.resolution = 64}), InvalidInput); // below double precision for coordinates of 1e12
     EXPECT_THROW(voxelize(box, {.voxel_size = 2e-4}), ResourceLimit); // 5000^3 voxels
     TriangleMesh degenerate; // only zero-area faces: nothing enclosed
     degenerate.vertices = {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}};

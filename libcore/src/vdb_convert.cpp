@@ -10,10 +10,17 @@
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <cstdio>
 
 namespace voxwarp::vdb_internal {
 
 openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, double voxel_size) {
+    if (!(voxel_size >= kSmallestVdbVoxel)) {
+        char text[160];
+        std::snprintf(text, sizeof text, "voxel size %g is below %g, the smallest an OpenVDB grid's transform takes; scale the model up", voxel_size,
+                      kSmallestVdbVoxel);
+        throw InvalidInput(text);
+    }
     auto xform = openvdb::math::Transform::createLinearTransform(voxel_size);
     xform->postTranslate(openvdb::Vec3d(origin.x(), origin.y(), origin.z()));
     return xform;
@@ -21,7 +28,7 @@ openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, do
 
 openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap) { return voxmap_transform(voxmap.origin, voxmap.voxel_size); }
 
-openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap) {
+openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap, bool index_space) {
     // The voxmap's blocks are OpenVDB's leaves: a stored block becomes a leaf (built in parallel, transposed
     // from x fastest to OpenVDB's z fastest), a uniform nonzero block a tile. Only the tree insertions are serial.
     using LeafT = openvdb::FloatTree::LeafNodeType;
@@ -68,7 +75,7 @@ openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap) {
                 for (int i = 0; i < B && origin.x() + i < dims[0]; ++i) leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(i, j, k)), u);
         tree.addLeaf(leaf);
     }
-    grid->setTransform(voxmap_transform(voxmap.origin(), voxmap.voxel_size()));
+    if (!index_space) grid->setTransform(voxmap_transform(voxmap.origin(), voxmap.voxel_size()));
     return grid;
 }
 

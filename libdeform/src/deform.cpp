@@ -22,6 +22,7 @@
 #include <memory>
 #include <tuple>
 #include <unordered_map>
+#include <unordered_set>
 
 namespace voxwarp {
 
@@ -121,14 +122,43 @@ std::vector<Constraint> expand_entries(const std::vector<Constraint>& constraint
     return rows;
 }
 
-/// The nearest point of a mesh to `point` within `reach` and its face's normal (zero: none).
-std::pair<Eigen::Vector3d, Eigen::Vector3d> nearest_on(const SourceSurface& surface, const Eigen::Vector3d& point, double reach) {
+/// The nearest point of a mesh to `point` within `reach`, and the surface's normal there (zero: none): the
+/// area-weighted normal of the faces of its sheet around it (reached from the nearest face through vertices within
+/// `around` of the point), not the nearest face's alone. A point on a voxel centre that the isosurface passes
+/// through is ringed by slivers a millionth of a voxel wide (marching cubes' crossings kept off the grid edges'
+/// ends), and the nearest of them can have any normal: a sphere's normal turned 20 degrees there came out turned 6.
+/// At a mesh's vertex or edge, the nearest face is one of several as well. The far side of a thin part, however
+/// near, is another sheet and does not count.
+std::pair<Eigen::Vector3d, Eigen::Vector3d> nearest_on(const SourceSurface& surface, const Eigen::Vector3d& point, double reach, double around) {
     const SourcePoint s = surface.nearest(point, Eigen::Vector3d::Zero(), reach);
     if (s.face < 0) return {point, Eigen::Vector3d::Zero()};
     const TriangleMesh& m = surface.mesh();
-    const auto& t = m.triangles[std::size_t(s.face)];
-    const Eigen::Vector3d &a = m.vertices[std::size_t(t[0])], &b = m.vertices[std::size_t(t[1])], &c = m.vertices[std::size_t(t[2])];
-    return {s.barycentric[0] * a + s.barycentric[1] * b + s.barycentric[2] * c, (b - a).cross(c - a).normalized()};
+    const auto& V = m.vertices;
+    TriangleMesh storage;
+    const auto& T = all_triangles(m, storage); // what the face index counts
+    const auto& t = T[std::size_t(s.face)];
+    const Eigen::Vector3d on = s.barycentric[0] * V[std::size_t(t[0])] + s.barycentric[1] * V[std::size_t(t[1])] + s.barycentric[2] * V[std::size_t(t[2])];
+    // The faces around each vertex near the point (the rest are never visited).
+    std::vector<char> near(V.size(), 0);
+    for (std::size_t v = 0; v < V.size(); ++v) near[v] = (V[v] - on).norm() <= around;
+    std::unordered_map<std::int32_t, std::vector<std::int32_t>> faces_at;
+    for (std::size_t f = 0; f < T.size(); ++f)
+        for (const auto v : T[f])
+            if (near[std::size_t(v)]) faces_at[v].push_back(std::int32_t(f));
+    std::vector<std::int32_t> queue{s.face};
+    std::unordered_set<std::int32_t> seen{s.face};
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    while (!queue.empty()) {
+        const auto& f = T[std::size_t(queue.back())];
+        queue.pop_back();
+        sum += (V[std::size_t(f[1])] - V[std::size_t(f[0])]).cross(V[std::size_t(f[2])] - V[std::size_t(f[0])]);
+        for (const auto v : f)
+            if (near[std::size_t(v)])
+                for (const auto g : faces_at[v])
+                    if (seen.insert(g).second) queue.push_back(g);
+    }
+    if (!(sum.norm() > 0)) sum = (V[std::size_t(t[1])] - V[std::size_t(t[0])]).cross(V[std::size_t(t[2])] - V[std::size_t(t[0])]);
+    return {on, sum.norm() > 0 ? Eigen::Vector3d(sum.normalized()) : Eigen::Vector3d::Zero()};
 }
 
 /// Candidates for a region's points in a voxmap: the centres of the voxels inside it at or over density 0.5.
@@ -316,7 +346,7 @@ NearestSurface nearest_of(const SparseVoxmap& voxmap) {
     return [&voxmap](const Eigen::Vector3d& point) -> std::pair<Eigen::Vector3d, Eigen::Vector3d> {
         const TriangleMesh near = isosurface_near(voxmap, point, kMissReach);
         if (near.triangles.empty()) return {point, Eigen::Vector3d::Zero()};
-        return nearest_on(SourceSurface(near), point, kMissReach * voxmap.voxel_size());
+        return nearest_on(SourceSurface(near), point, kMissReach * voxmap.voxel_size(), voxmap.voxel_size());
     };
 }
 
@@ -632,7 +662,7 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
         std::unique_ptr<SourceSurface> surface; // indexed only when an entry asks for the surface
         const std::vector<Constraint> rows = expand_entries(constraints, material_of(out), [&](const Eigen::Vector3d& p) {
             if (!surface) surface = std::make_unique<SourceSurface>(out);
-            return nearest_on(*surface, p, kMissReach * frame.voxel_size);
+            return nearest_on(*surface, p, kMissReach * frame.voxel_size, frame.voxel_size);
         }, kPlateReach * frame.voxel_size, owner);
         EditReport er;
         er.solver = to_string(edit.solver);

@@ -432,7 +432,8 @@ std::optional<Eigen::Vector3d> pull_back(const std::vector<WarpStep>& steps, Eig
     Eigen::Matrix3d J;
     double size = 0;
     for (const WarpStep& s : steps) size = std::max(size, s.moved.spacing().maxCoeff());
-    const auto q = Puller(steps, 0, 1e-12 * size)(point, J);
+    // A trillionth of a region, or a few ulps of the point where it lies far from the origin (Newton stalls there).
+    const auto q = Puller(steps, 0, std::max(1e-12 * size, 1e-14 * point.norm()))(point, J);
     if (jacobian) *jacobian = J;
     return q;
 }

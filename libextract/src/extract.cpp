@@ -71,7 +71,11 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
         return options.mesher == Mesher::features ? extract_internal::restore_features(std::move(mesh), voxmap, options) : mesh;
     }
     openvdb::initialize();
-    return extract_grid(vdb_internal::to_density_grid(voxmap), options, progress);
+    // Meshed in index space, the points (32-bit floats) then put in the world as doubles: a world-space grid would
+    // round the points of a voxmap far from the origin, and OpenVDB refuses a transform for a voxel under 1.45e-5.
+    TriangleMesh mesh = extract_grid(vdb_internal::to_density_grid(voxmap, true), options, progress);
+    for (auto& v : mesh.vertices) v = voxmap.origin() + voxmap.voxel_size() * v;
+    return mesh;
 }
 
 } // namespace voxwarp

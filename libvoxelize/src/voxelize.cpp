@@ -455,11 +455,12 @@ Voxmap voxelize_frame(const TriangleMesh& mesh, const VoxelizeOptions& options) 
     const double longest = b.size().maxCoeff();
     const double h = options.voxel_size > 0 ? options.voxel_size : longest / options.resolution;
     if (!(h > 0)) throw InvalidInput("voxelize: the mesh has zero extent; give --voxel-size");
-    // Positions reach OpenVDB as 32-bit floats: a voxel below about 1e-6 of the coordinates' magnitude cannot be
-    // resolved (the mesh sits far from the origin compared with its size).
+    // Voxelizing works in the frame's index space (Job), but the warp, extraction and snapping work in world
+    // coordinates, as doubles: a voxel below 1e-9 of the coordinates' magnitude would be resolved to a millionth of
+    // itself at best there.
     const double magnitude = std::max(b.min.cwiseAbs().maxCoeff(), b.max.cwiseAbs().maxCoeff());
-    if (h < 1e-6 * magnitude)
-        throw InvalidInput("voxelize: voxel size " + format_number(h) + " is below float precision for coordinates as large as " +
+    if (h < 1e-9 * magnitude)
+        throw InvalidInput("voxelize: voxel size " + format_number(h) + " is below double precision for coordinates as large as " +
                            format_number(magnitude) + "; move the mesh near the origin or use a coarser resolution");
     std::array<std::int64_t, 3> dims{};
     for (int a = 0; a < 3; ++a) {
@@ -679,28 +680,50 @@ void voxelize_scan(const TriangleMesh& mesh, const openvdb::math::Transform& xfo
 }
 
 /// What both voxelize functions share before the heavy work: the frame, the memory check, the set-up.
+///
+/// The work is done in the frame's index space (voxel size 1, origin 0), the mesh moved there in double precision,
+/// and the voxmap gets its world frame back at the end. OpenVDB takes positions as 32-bit floats, which could not
+/// resolve a voxel of a mesh far from the origin compared with its size (a georeferenced scan), and its transforms
+/// refuse a voxel under 1.4e-5 world units (a scale whose cube is under 3e-15: a 1 mm part modelled in metres, at
+/// 128 voxels). Every step is the same in any units (distances scale with the voxel), so nothing else changes.
 struct Job {
-    Voxmap frame;
+    Voxmap frame; ///< index space while the job runs: origin 0, voxel size 1
+    Eigen::Vector3d origin; ///< the world frame's
+    double voxel_size;      ///< the world frame's
+    TriangleMesh mesh;      ///< the input in index space: (p - origin) / voxel_size
     Progress progress;
     openvdb::math::Transform::Ptr xform;
     float half_width;
     SignMethod method;
     Ramp ramp;
-    Job(const TriangleMesh& mesh, const VoxelizeOptions& options, bool sparse)
-        : frame(voxelize_frame(mesh, options)), progress(options.progress, "level set") {
+    Job(const TriangleMesh& world, const VoxelizeOptions& options, bool sparse)
+        : frame(voxelize_frame(world, options)), origin(frame.origin), voxel_size(frame.voxel_size), progress(options.progress, "level set") {
         openvdb::initialize();
-        require_memory(voxelize_memory_estimate(mesh, options, sparse), options.max_memory_bytes,
+        require_memory(voxelize_memory_estimate(world, options, sparse), options.max_memory_bytes,
                        "voxelizing at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
-        xform = vdb_internal::voxmap_transform(frame);
+        mesh.vertices.resize(world.vertices.size());
+        for (std::size_t v = 0; v < world.vertices.size(); ++v) mesh.vertices[v] = (world.vertices[v] - origin) / voxel_size;
+        mesh.triangles = world.triangles;
+        mesh.quads = world.quads;
+        frame.origin.setZero();
+        frame.voxel_size = 1;
+        xform = openvdb::math::Transform::createLinearTransform(1.0);
         half_width = float(options.ramp_voxels + 1.5);
         method = options.sign == SignMethod::automatic ? resolve_sign_method(mesh) : options.sign;
-        ramp = Ramp{float(0.5 / (options.ramp_voxels * frame.voxel_size))};
+        ramp = Ramp{float(0.5 / options.ramp_voxels)};
+    }
+    /// The dense voxmap, back in its world frame.
+    Voxmap take_frame() {
+        frame.origin = origin;
+        frame.voxel_size = voxel_size;
+        return std::move(frame);
     }
 };
 
 /// The flood fill's level set, or null when the job is on the winding-number path or `automatic` gave it up (the
 /// job then moves to winding numbers and the report says why).
-openvdb::FloatGrid::Ptr flood_fill_or_not(const TriangleMesh& mesh, const VoxelizeOptions& options, Job& job, bool sparse) {
+openvdb::FloatGrid::Ptr flood_fill_or_not(const TriangleMesh& world, const VoxelizeOptions& options, Job& job, bool sparse) {
+    const TriangleMesh& mesh = job.mesh;
     openvdb::FloatGrid::Ptr level_set;
     std::string why;
     if (job.method == SignMethod::flood_fill) {
@@ -710,7 +733,7 @@ openvdb::FloatGrid::Ptr flood_fill_or_not(const TriangleMesh& mesh, const Voxeli
             job.method = SignMethod::winding_number;
             VoxelizeOptions winding = options;
             winding.sign = SignMethod::winding_number;
-            require_memory(voxelize_memory_estimate(mesh, winding, sparse), options.max_memory_bytes,
+            require_memory(voxelize_memory_estimate(world, winding, sparse), options.max_memory_bytes,
                            "voxelizing by winding numbers at " + std::to_string(job.frame.dims[0]) + "x" + std::to_string(job.frame.dims[1]) + "x" +
                                std::to_string(job.frame.dims[2]));
         }
@@ -738,10 +761,10 @@ Voxmap voxelize(const TriangleMesh& mesh, const VoxelizeOptions& options) {
         job.frame.density.resize(std::size_t(job.frame.voxel_count())); // uninitialised: grid_to_dense writes every voxel
         grid_to_dense(*level_set, job.frame, job.ramp);
     } else {
-        voxelize_scan(mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
+        voxelize_scan(job.mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
     }
     job.progress.report(1.0);
-    return std::move(job.frame);
+    return job.take_frame();
 }
 
 SparseVoxmap voxelize_sparse(const TriangleMesh& mesh, const VoxelizeOptions& options) {
@@ -749,12 +772,12 @@ SparseVoxmap voxelize_sparse(const TriangleMesh& mesh, const VoxelizeOptions& op
     SparseVoxmap out;
     if (const auto level_set = flood_fill_or_not(mesh, options, job, true)) {
         job.progress.stage("density");
-        out = SparseVoxmap(job.frame.dims, job.frame.origin, job.frame.voxel_size);
+        out = SparseVoxmap(job.frame.dims, job.origin, job.voxel_size);
         // A leaf becomes a block (stored unless the ramp makes it uniform, deep inside or far outside), a tile one value.
         vdb_internal::grid_to_blocks(*level_set, openvdb::Coord(0, 0, 0), out, job.ramp);
     } else {
-        voxelize_scan(mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
-        out = to_sparse(job.frame);
+        voxelize_scan(job.mesh, *job.xform, job.half_width, options, job.ramp, job.frame, job.progress);
+        out = to_sparse(job.take_frame());
     }
     job.progress.report(1.0);
     return out;

@@ -15,13 +15,17 @@
 
 namespace voxwarp::vdb_internal {
 
-/// Transform taking grid index (i, j, k) to the world centre of voxmap voxel (i, j, k).
+/// Transform taking grid index (i, j, k) to the world centre of voxmap voxel (i, j, k). @throw InvalidInput for a
+/// voxel under kSmallestVdbVoxel, which OpenVDB's transforms refuse.
 openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap);
 openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, double voxel_size);
+/// OpenVDB's linear transforms need a scale whose cube is at least 3e-15 (math::ScaleMap).
+inline constexpr double kSmallestVdbVoxel = 1.45e-5;
 
-/// Sparse copy of a voxmap's density (background 0; constant blocks become tiles). Parallel.
+/// Sparse copy of a voxmap's density (background 0; constant blocks become tiles). Parallel. With `index_space`,
+/// the grid's transform is the identity (grid index = voxmap index), whatever the voxel size.
 openvdb::FloatGrid::Ptr to_density_grid(const Voxmap& voxmap);
-openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap);
+openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap, bool index_space = false);
 
 /// Fill `out` block by block from `grid`: the grid's leaf at index lo + 8 (bx, by, bz) becomes block (bx, by, bz),
 /// its values (OpenVDB's z fastest) transposed to x fastest, each through f; where there is no leaf, the tile
