@@ -1,5 +1,7 @@
 #include "cli_common.h"
 
+#include <cstdio>
+
 #include <voxwarp/mesh_io.h>
 #include <voxwarp/vdb_io.h>
 #include <voxwarp/voxelize.h>
@@ -39,8 +41,10 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
             write_vdb(voxmap, args->output);
             const auto& n = voxmap.dims();
             if (!done.note.empty()) note(global, "voxelize: " + done.note);
+            char size[32];
+            std::snprintf(size, sizeof size, "%.6g", voxmap.voxel_size());
             note(global, "wrote " + args->output + ": " + std::to_string(n[0]) + "x" + std::to_string(n[1]) + "x" + std::to_string(n[2]) +
-                             " voxels of size " + std::to_string(voxmap.voxel_size()));
+                             " voxels of size " + size);
         };
     });
 }

@@ -61,14 +61,28 @@ openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::stri
 
 } // namespace
 
+namespace {
+
+/// The grid for a .vdb at `path`; the voxmap's own problems (a voxel too small for OpenVDB) name the file.
+template <class V>
+openvdb::FloatGrid::Ptr grid_for(const V& voxmap, const std::string& path) {
+    try {
+        return vdb_internal::to_density_grid(voxmap);
+    } catch (const InvalidInput& e) {
+        throw InvalidInput(path + ": " + e.what());
+    }
+}
+
+} // namespace
+
 void write_vdb(const Voxmap& voxmap, const std::string& path) {
     openvdb::initialize();
-    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims, path);
+    write_density_grid(grid_for(voxmap, path), voxmap.dims, path);
 }
 
 void write_vdb(const SparseVoxmap& voxmap, const std::string& path) {
     openvdb::initialize();
-    write_density_grid(vdb_internal::to_density_grid(voxmap), voxmap.dims(), path);
+    write_density_grid(grid_for(voxmap, path), voxmap.dims(), path);
 }
 
 Voxmap read_vdb(const std::string& path, const std::string& grid_name) { return vdb_internal::from_float_grid(*read_float_grid(path, grid_name), path); }
