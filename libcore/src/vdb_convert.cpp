@@ -29,6 +29,8 @@ openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, do
 openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap) { return voxmap_transform(voxmap.origin, voxmap.voxel_size); }
 
 openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap, bool index_space) {
+    // First, so that a voxel OpenVDB cannot hold is refused before the work.
+    const auto xform = index_space ? openvdb::math::Transform::createLinearTransform(1.0) : voxmap_transform(voxmap.origin(), voxmap.voxel_size());
     // The voxmap's blocks are OpenVDB's leaves: a stored block becomes a leaf (built in parallel, transposed
     // from x fastest to OpenVDB's z fastest), a uniform nonzero block a tile. Only the tree insertions are serial.
     using LeafT = openvdb::FloatTree::LeafNodeType;
@@ -75,7 +77,7 @@ openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap, bool index_s
                 for (int i = 0; i < B && origin.x() + i < dims[0]; ++i) leaf->setValueOn(LeafT::coordToOffset(openvdb::Coord(i, j, k)), u);
         tree.addLeaf(leaf);
     }
-    if (!index_space) grid->setTransform(voxmap_transform(voxmap.origin(), voxmap.voxel_size()));
+    grid->setTransform(xform);
     return grid;
 }
 

@@ -684,7 +684,7 @@ void voxelize_scan(const TriangleMesh& mesh, const openvdb::math::Transform& xfo
 /// The work is done in the frame's index space (voxel size 1, origin 0), the mesh moved there in double precision,
 /// and the voxmap gets its world frame back at the end. OpenVDB takes positions as 32-bit floats, which could not
 /// resolve a voxel of a mesh far from the origin compared with its size (a georeferenced scan), and its transforms
-/// refuse a voxel under 1.4e-5 world units (a scale whose cube is under 3e-15: a 1 mm part modelled in metres, at
+/// refuse a voxel under 1.45e-5 world units (a scale whose cube is under 3e-15: a 1 mm part modelled in metres, at
 /// 128 voxels). Every step is the same in any units (distances scale with the voxel), so nothing else changes.
 struct Job {
     Voxmap frame; ///< index space while the job runs: origin 0, voxel size 1
