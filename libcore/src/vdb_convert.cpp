@@ -26,8 +26,6 @@ openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, do
     return xform;
 }
 
-openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap) { return voxmap_transform(voxmap.origin, voxmap.voxel_size); }
-
 openvdb::FloatGrid::Ptr to_density_grid(const SparseVoxmap& voxmap, bool index_space) {
     // First, so that a voxel OpenVDB cannot hold is refused before the work.
     const auto xform = index_space ? openvdb::math::Transform::createLinearTransform(1.0) : voxmap_transform(voxmap.origin(), voxmap.voxel_size());

@@ -74,7 +74,7 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
     // Meshed in index space, the points (32-bit floats) then put in the world as doubles: a world-space grid would
     // round the points of a voxmap far from the origin, and OpenVDB refuses a transform for a voxel under 1.45e-5.
     TriangleMesh mesh = extract_grid(vdb_internal::to_density_grid(voxmap, true), options, progress);
-    for (auto& v : mesh.vertices) v = voxmap.origin() + voxmap.voxel_size() * v;
+    for (auto& v : mesh.vertices) v = voxmap.world(v.x(), v.y(), v.z());
     return mesh;
 }
 

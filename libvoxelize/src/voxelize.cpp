@@ -702,7 +702,7 @@ struct Job {
         require_memory(voxelize_memory_estimate(world, options, sparse), options.max_memory_bytes,
                        "voxelizing at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
         mesh.vertices.resize(world.vertices.size());
-        for (std::size_t v = 0; v < world.vertices.size(); ++v) mesh.vertices[v] = (world.vertices[v] - origin) / voxel_size;
+        for (std::size_t v = 0; v < world.vertices.size(); ++v) mesh.vertices[v] = frame.index_of(world.vertices[v]);
         mesh.triangles = world.triangles;
         mesh.quads = world.quads;
         frame.origin.setZero();

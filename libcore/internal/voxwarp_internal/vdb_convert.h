@@ -17,7 +17,6 @@ namespace voxwarp::vdb_internal {
 
 /// Transform taking grid index (i, j, k) to the world centre of voxmap voxel (i, j, k). @throw InvalidInput for a
 /// voxel under kSmallestVdbVoxel, which OpenVDB's transforms refuse.
-openvdb::math::Transform::Ptr voxmap_transform(const Voxmap& voxmap);
 openvdb::math::Transform::Ptr voxmap_transform(const Eigen::Vector3d& origin, double voxel_size);
 /// OpenVDB's linear transforms need a scale whose cube is at least 3e-15 (math::ScaleMap).
 inline constexpr double kSmallestVdbVoxel = 1.45e-5;
