@@ -194,11 +194,14 @@ def test_feature_mesher_keeps_corners_and_matches_the_cli(tmp):
     h = report["voxel_size"]
     misses = {}
     for mesher in ("mc", "features"):
-        V2, F2, _ = voxwarp.deform(V, F, edit, resolution=resolution, mesher=mesher)
+        V2, F2, _ = voxwarp.deform(V, F, edit, resolution=resolution, mesher=mesher, snap=False)
         misses[mesher] = _corner_miss(V2, V) / h
-    # Marching cubes cuts every corner off; the feature mesher puts a vertex on it.
+    # Unsnapped, marching cubes cuts every corner off; the feature mesher puts a vertex on it.
     assert misses["features"].max() < 0.15, misses
     assert misses["mc"].min() > 0.3, misses
+    # Snapped (the default), either way: refinement puts the input's corners in.
+    V2, F2, _ = voxwarp.deform(V, F, edit, resolution=resolution)
+    assert (_corner_miss(V2, V) / h).max() < 0.01
     # The same call from the command line writes the same bytes.
     voxwarp.write_mesh(tmp / "in.ply", V, F)
     (tmp / "edit.json").write_text(json.dumps(edit))

@@ -88,7 +88,7 @@ struct SnapReport {
     std::size_t snapped = 0;   ///< vertices moved onto the exact image of their source point (or of an anchor; with snap_and_refine, the refined too)
     std::size_t partly_snapped = 0; ///< vertices moved max_move_voxels toward an exact image up to twice that far
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
-    std::size_t refined = 0;   ///< snap_and_refine: vertices added on edges across the input's creases (among the snapped)
+    std::size_t refined = 0;   ///< snap_and_refine: vertices added on edges across the input's creases, and at its corners and along its creases (among the snapped)
 };
 
 /// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
@@ -100,7 +100,7 @@ SnapReport snap_to_sources(TriangleMesh& output, const TriangleMesh& input, cons
 
 struct RefineOptions {
     double chord_voxels = 0.05; ///< an edge whose middle lies farther than this from the exact surface is split
-    int rounds = 1;             ///< passes, each splitting the edges the last one made or left (0: none)
+    int rounds = 1;             ///< passes, each splitting the edges the last one made or left (0: none, and no corners or crease points put in)
 };
 
 /// Where an output edge runs across a crease or bump of the input (its two ends' sources on faces that meet at an
@@ -108,9 +108,15 @@ struct RefineOptions {
 /// source point (where the two faces share an edge, the point of that edge nearest the output edge, so the pieces
 /// lie on the faces; otherwise the source of the ends' sources' middle) when the middle misses that by more than
 /// chord_voxels, unless that is more than max_move_voxels or a piece would fold. Triangles split 1 to 2, 3 or 4 by their split edges, so the mesh
-/// stays closed and its topology is kept; thin parts (another sheet within 1.5 voxels) are left alone. `sources`
-/// grows with the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on
-/// the thread count. Returns the number of vertices added.
+/// stays closed and its topology is kept; thin parts (another sheet within 1.5 voxels) are left alone.
+/// Then where the input's corners and creases lie (vertices whose faces' normals spread by over 10 degrees, and
+/// points half a voxel apart along edges whose faces meet at over 10 degrees, on faces at least half a voxel
+/// long), the output's triangles still cut under them: each such point whose exact image lies more than
+/// chord_voxels and at most 1.5 voxels from the output goes in, splitting the nearest triangle into three (or its
+/// nearest side, both triangles into two), unless a piece would turn over, fold back onto a neighbour, or cross
+/// the output (thin parts included: a rim's tip may go in). `sources` grows with the vertices. A mesh with quads
+/// is left as it is. Parallel (oneTBB); the answer does not depend on the thread count. Returns the number of
+/// vertices added.
 std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
                               const SnapOptions& options, const RefineOptions& refine = {});
 
