@@ -722,7 +722,7 @@ std::optional<SourcePoint> crease_point(const SourceSurface::Impl& surface, std:
     return s;
 }
 
-/// Voxels: how far an input corner's image may lie from the output for the corner to be put in (insert_corners).
+/// Voxels: how far a corner's or crease point's image may lie from the output for it to be put in (insert_points).
 constexpr double kCornerReach = 1.5;
 
 /// Passes of insert_points: a point refused beside one just put in is tried again (at 256 on the bunny's ear edit
@@ -854,13 +854,14 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
     return points;
 }
 
-/// The input's corners put into the output. Where creases meet at a tip, the output's vertices lie on the exact
-/// surface around it, but its triangles cut under the tip: the bunny's ear edit at 128 missed one of the coarse
-/// input's corners by 1.09 voxels, with every output vertex near it snapped. Splitting edges on the creases
-/// (refine_with) reaches points of the creases, not where they meet. So each corner whose exact image lies more
-/// than `chord` (and at most `reach`) from the output goes in: it splits the nearest output triangle into three,
+/// The input's corners and crease points (feature_points) put into the output. Where creases meet at a tip, the
+/// output's vertices lie on the exact surface around it, but its triangles cut under the tip: the bunny's ear edit
+/// at 128 missed one of the coarse input's corners by 1.09 voxels, with every output vertex near it snapped.
+/// Splitting edges on the creases (refine_with) reaches points of the creases, not where they meet, and not where
+/// the split would move more than half a voxel. So each point whose exact image lies more than `chord` (and at
+/// most `reach`) from the output goes in: it splits the nearest output triangle into three,
 /// or, where it lies over one of that triangle's sides, the side (both its triangles into two). Not where a piece
-/// would turn over against its triangle, look away from every face of the corner (pushed forward), fold back onto a
+/// would turn over against its triangle, look away from every face at the point (pushed forward), fold back onto a
 /// neighbour, or cross the output (its triangles filed in cells of side `cell`). Points whose pieces would lie near
 /// another's are tested against those too; in order of `points`, so the answer does not depend on the thread count.
 /// Returns the vertices added; `settled` marks the points put in, and those the output passes within `chord` of or
@@ -919,7 +920,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             if (*q != f && std::find(T[*q].begin(), T[*q].end(), b) != T[*q].end()) return *q;
         return -1;
     };
-    constexpr std::int32_t kNew = -1; // the corner's vertex, in a piece
+    constexpr std::int32_t kNew = -1; // the point's new vertex, in a piece
     struct Insert {
         std::vector<std::uint32_t> triangles;              // those it replaces (one, or the two of a side)
         std::vector<std::array<std::int32_t, 3>> pieces;   // two or three per triangle, in order
@@ -976,8 +977,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return i == kNew ? x : P[std::size_t(i)]; };
             auto normal_of = [&](const std::array<std::int32_t, 3>& p) { return Eigen::Vector3d((at(p[1]) - at(p[0])).cross(at(p[2]) - at(p[0]))); };
             std::array<Eigen::Vector3d, FeaturePoint::kFaces> exact{};
-            const std::size_t used = count;
-            for (std::size_t a = 0; a < used; ++a) exact[a] = surface.normal[faces[a]];
+            for (std::size_t a = 0; a < count; ++a) exact[a] = surface.normal[faces[a]];
             exact = push_normals<FeaturePoint::kFaces>(steps, point.at, exact);
             bool folds = false;
             for (std::size_t q = 0; q < in.pieces.size() && !folds; ++q) {
@@ -987,7 +987,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
                 folds = after.dot(before) <= 0 || after.norm() < 1e-4 * chord * chord;
                 // Facing away from every face of the point, as the map carries them.
                 bool along = false;
-                for (std::size_t a = 0; a < used; ++a) along |= after.dot(exact[a]) > 0;
+                for (std::size_t a = 0; a < count; ++a) along |= after.dot(exact[a]) > 0;
                 folds |= !along;
                 // Folded back onto the neighbour across an old side (a tip's sides may stand at a right angle to
                 // the surface around it, and more: the ear's rim turns by 105 degrees).
