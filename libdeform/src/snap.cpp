@@ -725,8 +725,11 @@ std::optional<SourcePoint> crease_point(const SourceSurface::Impl& surface, std:
 /// Voxels: how far a corner's or crease point's image may lie from the output for it to be put in (insert_points).
 constexpr double kCornerReach = 1.5;
 
-/// Passes of insert_points: a point refused beside one just put in is tried again (at 256 on the bunny's ear edit
-/// the passes put in 1307, 550 and 209 points, taking 0.12, 0.04 and 0.03 s).
+/// Passes of insert_points: a point refused beside one just put in is tried again. At 256 on the bunny's ear edit
+/// the first pass takes about 0.05 s and each later one under 0.02 s (OutputIndex). More passes bring the bent
+/// box's edges closer (mean 0.093 / 0.079 voxel at 64 / 128 after 3 passes, 0.074 / 0.056 after 6), but on a scan,
+/// whose every vertex is a corner, each pass puts in thousands of points: 8 passes took the snowden scan's nose
+/// edit at 128 from 2.0 to 4.0 s of snapping.
 constexpr int kInsertRounds = 3;
 
 /// A corner's piece may turn from the neighbour across its side by at most acos(-kCornerFold) (150 degrees).
@@ -854,6 +857,137 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
     return points;
 }
 
+/// The output's triangles around each vertex, and filed by the cell (of side `cell`) of their middles, kept up to
+/// date as insert_points changes them: built once; after each pass the triangles it replaced or added are filed
+/// apart (a few thousand against the output's hundreds of thousands), so that a later pass costs what its points do.
+class OutputIndex {
+public:
+    OutputIndex(const TriangleMesh& output, double cell)
+        : base_(output.vertices.size(), [&](auto visit) {
+              for (std::size_t f = 0; f < output.triangles.size(); ++f)
+                  for (auto v : output.triangles[f]) visit(std::size_t(v), std::uint32_t(f));
+          }),
+          cell_(cell), base_count_(output.vertices.size()), patch_(output.vertices.size(), -1), stale_(output.triangles.size(), 0) {
+        const auto& P = output.vertices;
+        const auto& T = output.triangles;
+        origin_ = P.empty() ? Eigen::Vector3d::Zero() : P[0];
+        for (const auto& p : P) origin_ = origin_.cwiseMin(p);
+        // Cells of middles start at 0 (origin_ is the least corner); rows run along x, one per (y, z).
+        std::array<std::int64_t, 3> top{0, 0, 0};
+        items_.resize(T.size());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, T.size(), 4096), [&](const auto& r) {
+            for (std::size_t f = r.begin(); f != r.end(); ++f) items_[f] = {key(middle(output, f)), std::uint32_t(f)};
+        });
+        for (const auto& [k, f] : items_) top[1] = std::max(top[1], std::int64_t(k >> 21 & kMask)), top[2] = std::max(top[2], std::int64_t(k >> 42));
+        tbb::parallel_sort(items_.begin(), items_.end());
+        rows_y_ = top[1] + 1, rows_z_ = top[2] + 1;
+        row_start_.assign(std::size_t(rows_y_ * rows_z_ + 1), 0);
+        for (const auto& [k, f] : items_) ++row_start_[std::size_t(row_of(k)) + 1];
+        for (std::size_t r = 1; r < row_start_.size(); ++r) row_start_[r] += row_start_[r - 1];
+    }
+
+    /// Calls visit(f) for the triangles f whose middles lie within a cell of the box [lo, hi].
+    template <class Visit>
+    void near(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Visit& visit) const {
+        const auto first = cell_of(lo), last = cell_of(hi);
+        for (std::int64_t z = first[2] - 1; z <= last[2] + 1; ++z)
+            for (std::int64_t y = first[1] - 1; y <= last[1] + 1; ++y) row(y, z, first[0] - 1, last[0] + 1, visit);
+    }
+
+    /// Calls visit(f) for the triangles whose middles lie in the cells x0 .. x1 of the row (y, z) of point p's cell.
+    template <class Visit>
+    void row_of_point(const Eigen::Vector3d& p, std::int64_t reach, const Visit& visit) const {
+        const auto c = cell_of(p);
+        row(c[1], c[2], c[0] - reach, c[0] + reach, visit);
+    }
+
+    /// The triangles around vertex v.
+    std::pair<const std::uint32_t*, const std::uint32_t*> ring(std::size_t v) const {
+        if (v >= patch_.size() || (patch_[v] < 0 && v >= base_count_)) return {nullptr, nullptr}; // added since the last update
+        if (patch_[v] >= 0) {
+            const auto& list = patches_[std::size_t(patch_[v])];
+            return {list.data(), list.data() + list.size()};
+        }
+        return {base_.begin(v), base_.end(v)};
+    }
+
+    /// After triangles `changed` were replaced or added (and vertices added): their rings and cells.
+    void update(const TriangleMesh& output, const std::vector<std::uint32_t>& changed) {
+        const auto& T = output.triangles;
+        patch_.resize(output.vertices.size(), -1);
+        stale_.resize(T.size(), 0);
+        std::vector<std::pair<std::int32_t, std::uint32_t>> corners; // (vertex, changed triangle), by vertex
+        for (const std::uint32_t f : changed) {
+            if (!stale_[f]) stale_[f] = 1, moved_.push_back(f);
+            for (const std::int32_t v : T[f]) corners.push_back({v, f});
+        }
+        std::sort(corners.begin(), corners.end());
+        std::vector<std::uint32_t> sorted(changed);
+        std::sort(sorted.begin(), sorted.end());
+        for (std::size_t i = 0; i < corners.size();) {
+            const std::int32_t v = corners[i].first;
+            const auto [b, e] = ring(std::size_t(v));
+            std::vector<std::uint32_t> list;
+            for (const std::uint32_t* q = b; q != e; ++q) // triangles that still hold v, and are not among the changed
+                if (!std::binary_search(sorted.begin(), sorted.end(), *q) && std::find(T[*q].begin(), T[*q].end(), v) != T[*q].end()) list.push_back(*q);
+            for (; i < corners.size() && corners[i].first == v; ++i) list.push_back(corners[i].second);
+            if (patch_[std::size_t(v)] < 0) patch_[std::size_t(v)] = std::int32_t(patches_.size()), patches_.emplace_back();
+            patches_[std::size_t(patch_[std::size_t(v)])] = std::move(list);
+        }
+        extra_.clear();
+        for (const std::uint32_t f : moved_) extra_.push_back({key(middle(output, f)), f});
+        std::sort(extra_.begin(), extra_.end());
+    }
+
+private:
+    using Item = std::pair<std::uint64_t, std::uint32_t>;
+    static constexpr std::uint64_t kMask = (1u << 21) - 1;
+
+    static Eigen::Vector3d middle(const TriangleMesh& output, std::size_t f) {
+        const auto& t = output.triangles[f];
+        return (output.vertices[std::size_t(t[0])] + output.vertices[std::size_t(t[1])] + output.vertices[std::size_t(t[2])]) / 3;
+    }
+    std::array<std::int64_t, 3> cell_of(const Eigen::Vector3d& p) const {
+        const Eigen::Vector3d q = (p - origin_) / cell_;
+        return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
+    }
+    static std::uint64_t key(std::int64_t x, std::int64_t y, std::int64_t z) { // 21 bits an axis, z-major
+        auto bits = [](std::int64_t v) { return std::uint64_t(std::clamp<std::int64_t>(v, 0, std::int64_t(kMask))); };
+        return bits(z) << 42 | bits(y) << 21 | bits(x);
+    }
+    std::uint64_t key(const Eigen::Vector3d& p) const {
+        const auto c = cell_of(p);
+        return key(c[0], c[1], c[2]);
+    }
+    std::int64_t row_of(std::uint64_t k) const { return std::int64_t(k >> 42) * rows_y_ + std::int64_t(k >> 21 & kMask); }
+
+    template <class Visit>
+    void row(std::int64_t y, std::int64_t z, std::int64_t x0, std::int64_t x1, const Visit& visit) const {
+        if (y < 0 || z < 0 || x1 < 0 || y > std::int64_t(kMask) || z > std::int64_t(kMask)) return; // (new middles may lie below the origin: clamped to 0 like the queries)
+        const std::uint64_t from = key(x0, y, z), to = key(x1, y, z);
+        if (y < rows_y_ && z < rows_z_) {
+            const std::int64_t r = z * rows_y_ + y;
+            const Item* b = items_.data() + row_start_[std::size_t(r)];
+            const Item* e = items_.data() + row_start_[std::size_t(r) + 1];
+            for (const Item* it = std::lower_bound(b, e, Item(from, 0)); it != e && it->first <= to; ++it)
+                if (!stale_[it->second]) visit(it->second);
+        }
+        for (auto it = std::lower_bound(extra_.begin(), extra_.end(), Item(from, 0)); it != extra_.end() && it->first <= to; ++it) visit(it->second);
+    }
+
+    Adjacency base_;
+    double cell_;
+    std::size_t base_count_; ///< vertices in base_
+    Eigen::Vector3d origin_;
+    std::vector<Item> items_, extra_; ///< sorted by key; extra_: the moved triangles' present cells
+    std::vector<std::uint32_t> row_start_;
+    std::int64_t rows_y_ = 0, rows_z_ = 0;
+    std::vector<std::int32_t> patch_;                ///< per vertex: its ring in patches_, or -1 (base_)
+    std::vector<std::vector<std::uint32_t>> patches_;
+    std::vector<char> stale_;                         ///< per triangle: filed in extra_, not items_
+    std::vector<std::uint32_t> moved_;
+};
+
 /// The input's corners and crease points (feature_points) put into the output. Where creases meet at a tip, the
 /// output's vertices lie on the exact surface around it, but its triangles cut under the tip: the bunny's ear edit
 /// at 128 missed one of the coarse input's corners by 1.09 voxels, with every output vertex near it snapped.
@@ -862,61 +996,26 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
 /// most `reach`) from the output goes in: it splits the nearest output triangle into three,
 /// or, where it lies over one of that triangle's sides, the side (both its triangles into two). Not where a piece
 /// would turn over against its triangle, look away from every face at the point (pushed forward), fold back onto a
-/// neighbour, or cross the output (its triangles filed in cells of side `cell`). Points whose pieces would lie near
+/// neighbour, or cross the output (the triangles `index` files near the pieces). Points whose pieces would lie near
 /// another's are tested against those too; in order of `points`, so the answer does not depend on the thread count.
 /// Returns the vertices added; `settled` marks the points put in, and those the output passes within `chord` of or
 /// has nothing within `reach` of (not looked at again).
 std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface, const std::vector<WarpStep>& steps,
-                          const std::vector<FeaturePoint>& points, std::vector<char>& settled, double chord, double reach, double cell) {
+                          const std::vector<FeaturePoint>& points, std::vector<char>& settled, double chord, double reach, OutputIndex& index) {
     std::vector<Eigen::Vector3d>& P = output.vertices;
     auto& T = output.triangles;
-    const std::size_t nv = P.size(), nf = T.size(), ni = points.size();
-    // Output vertex -> its triangles.
-    const Adjacency ring(nv, [&](auto visit) {
-        for (std::size_t f = 0; f < nf; ++f)
-            for (auto v : T[f]) visit(std::size_t(v), std::uint32_t(f));
-    });
-    // The triangles filed by the cell (of side `cell`) of their middles, sorted by key: x runs of a (y, z) row lie
-    // together.
-    struct Grid {
-        Eigen::Vector3d origin;
-        double cell = 1;
-        std::vector<std::pair<std::uint64_t, std::uint32_t>> items;
-        std::array<std::int64_t, 3> cell_of(const Eigen::Vector3d& p) const {
-            const Eigen::Vector3d q = (p - origin) / cell;
-            return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
-        }
-        static std::uint64_t key(const std::array<std::int64_t, 3>& c) { // 21 bits an axis, z-major, offset past -1
-            auto bits = [](std::int64_t v) { return std::uint64_t(std::clamp<std::int64_t>(v + 2, 0, (1 << 21) - 1)); };
-            return bits(c[2]) << 42 | bits(c[1]) << 21 | bits(c[0]);
-        }
-    } grid;
-    grid.cell = cell;
-    grid.origin = P.empty() ? Eigen::Vector3d::Zero() : P[0];
-    for (const auto& p : P) grid.origin = grid.origin.cwiseMin(p);
-    grid.items.resize(nf);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nf, 4096), [&](const auto& r) {
-        for (std::size_t f = r.begin(); f != r.end(); ++f)
-            grid.items[f] = {Grid::key(grid.cell_of((P[std::size_t(T[f][0])] + P[std::size_t(T[f][1])] + P[std::size_t(T[f][2])]) / 3)), std::uint32_t(f)};
-    });
-    tbb::parallel_sort(grid.items.begin(), grid.items.end());
-    // The triangles whose middles lie within a cell of the box [lo, hi].
+    const std::size_t nf = T.size(), ni = points.size();
     auto near_triangles = [&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<std::uint32_t>& out) {
         out.clear();
-        const auto first = grid.cell_of(lo), last = grid.cell_of(hi);
-        for (std::int64_t k = first[2] - 1; k <= last[2] + 1; ++k)
-            for (std::int64_t j = first[1] - 1; j <= last[1] + 1; ++j) {
-                const auto from = std::lower_bound(grid.items.begin(), grid.items.end(), std::pair(Grid::key({first[0] - 1, j, k}), std::uint32_t(0)));
-                const auto to = std::lower_bound(from, grid.items.end(), std::pair(Grid::key({last[0] + 2, j, k}), std::uint32_t(0)));
-                for (auto it = from; it != to; ++it) out.push_back(it->second);
-            }
+        index.near(lo, hi, [&](std::uint32_t f) { out.push_back(f); });
     };
     auto face_normal = [&](const std::array<std::int32_t, 3>& u) {
         return Eigen::Vector3d((P[std::size_t(u[1])] - P[std::size_t(u[0])]).cross(P[std::size_t(u[2])] - P[std::size_t(u[0])]));
     };
     // The triangle other than `f` with side (a, b), or -1.
     auto across = [&](std::uint32_t f, std::int32_t a, std::int32_t b) -> std::int64_t {
-        for (const std::uint32_t* q = ring.begin(std::size_t(a)); q != ring.end(std::size_t(a)); ++q)
+        const auto [b0, e0] = index.ring(std::size_t(a));
+        for (const std::uint32_t* q = b0; q != e0; ++q)
             if (*q != f && std::find(T[*q].begin(), T[*q].end(), b) != T[*q].end()) return *q;
         return -1;
     };
@@ -947,10 +1046,22 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
                     const auto& t = T[f];
                     const Eigen::Vector3d b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
                     const double d = (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).norm();
-                    if (d < best) best = d, nearest = f, weights = b;
+                    if (d < best || (d == best && f < nearest)) best = d, nearest = f, weights = b; // (the grid's order is not the faces')
                 }
             };
-            search(0); // the cells next to the point's: most points lie on the output already
+            // Most points lie on the output already: the triangles in the point's row of three cells (one search of
+            // the grid) usually hold one that passes within the chord.
+            bool on = false;
+            index.row_of_point(x, 1, [&](std::uint32_t f) {
+                const auto& t = T[f];
+                const Eigen::Vector3d b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
+                on = on || (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).squaredNorm() <= chord * chord;
+            });
+            if (on) {
+                settled[v] = 1;
+                continue;
+            }
+            search(0); // the cells next to the point's
             if (best > chord) search(reach);
             if (!(best > chord && best <= reach)) {
                 settled[v] = 1;
@@ -1003,12 +1114,10 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             // The pieces must not cross the output: the triangles whose middles lie within a cell of their box,
             // against the pieces' new sides, and the pieces against the triangles' sides (a test against the
             // other sheet's tangent plane would refuse a thin part's rim, whose tip lies beyond both sheets' planes).
-            {
-                Eigen::Vector3d lo = x, hi = x;
-                for (const std::uint32_t f : in.triangles)
-                    for (const std::int32_t c : T[f]) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
-                near_triangles(lo, hi, other);
-            }
+            Eigen::Vector3d lo = x, hi = x; // the pieces' box
+            for (const std::uint32_t f : in.triangles)
+                for (const std::int32_t c : T[f]) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
+            near_triangles(lo, hi, other);
             auto segment_meets = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
                 const double u = internal::line_meets_triangle(p, q - p, a, b, c);
                 return u >= 0 && u <= 1;
@@ -1017,6 +1126,8 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             for (const std::uint32_t f : other) {
                 if (std::find(in.triangles.begin(), in.triangles.end(), f) != in.triangles.end()) continue;
                 const auto& u = T[f];
+                const Eigen::Vector3d &u0 = P[std::size_t(u[0])], &u1 = P[std::size_t(u[1])], &u2 = P[std::size_t(u[2])];
+                if ((u0.cwiseMax(u1).cwiseMax(u2).array() < lo.array()).any() || (u0.cwiseMin(u1).cwiseMin(u2).array() > hi.array()).any()) continue;
                 auto has = [&](std::int32_t i) { return std::find(u.begin(), u.end(), i) != u.end(); };
                 for (const auto& p : in.pieces) {
                     for (int k = 0; k < 3 && !crosses; ++k) {
@@ -1042,6 +1153,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
     std::vector<std::array<std::int32_t, 3>> put;                    // those pieces
     std::vector<std::size_t> put_from{0};                            // point b's pieces: put[put_from[b] .. put_from[b + 1])
     std::size_t added = 0;
+    std::vector<std::uint32_t> changed; // triangles replaced or added
     for (std::size_t v = 0; v < ni; ++v) {
         if (!found[v]) continue;
         const Insert& in = *found[v];
@@ -1051,9 +1163,11 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             for (const std::uint32_t f : in.triangles)
                 if (taken[f]) return true;
             for (const std::uint32_t f : in.triangles)
-                for (const std::int32_t c : T[f])
-                    for (const std::uint32_t* q = ring.begin(std::size_t(c)); q != ring.end(std::size_t(c)); ++q)
+                for (const std::int32_t c : T[f]) {
+                    const auto [b0, e0] = index.ring(std::size_t(c));
+                    for (const std::uint32_t* q = b0; q != e0; ++q)
                         if (taken[*q]) return true;
+                }
             return false;
         };
         if (busy()) continue;
@@ -1084,11 +1198,12 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
         sources.push_back(in.source);
         const std::size_t per = pieces.size() / in.triangles.size();
         for (std::size_t q = 0; q < pieces.size(); ++q) {
-            if (q % per == 0) T[in.triangles[q / per]] = pieces[q];
-            else T.push_back(pieces[q]);
+            if (q % per == 0) T[in.triangles[q / per]] = pieces[q], changed.push_back(in.triangles[q / per]);
+            else changed.push_back(std::uint32_t(T.size())), T.push_back(pieces[q]);
         }
         ++added;
     }
+    index.update(output, changed);
     return added;
 }
 
@@ -1253,8 +1368,9 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
     if (refine.rounds > 0) {
         const std::vector<FeaturePoint> points = feature_points(surface, steps, h);
         std::vector<char> settled(points.size(), 0);
+        OutputIndex index(output, h);
         for (int round = 0; round < kInsertRounds; ++round) {
-            const std::size_t more = insert_points(output, sources, surface, steps, points, settled, chord, kCornerReach * h, h);
+            const std::size_t more = insert_points(output, sources, surface, steps, points, settled, chord, kCornerReach * h, index);
             added += more;
             if (more == 0) break;
         }
