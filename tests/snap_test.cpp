@@ -363,8 +363,8 @@ TEST(Snap, TheInputsCornersAndCreasesComeOutOnTheExactWarp) {
             std::printf("%s at %d: corners within %.4f voxel of the output, edges mean %.4f p99 %.3f max %.3f; %zu vertices added\n", edit, resolution,
                         corner_max, edge_mean, along[along.size() * 99 / 100], along.back(), report.refined_vertices);
             EXPECT_LE(corner_max, 0.05); // measured 0.000
-            EXPECT_LE(edge_mean, 0.15);  // measured 0.04-0.08
-            EXPECT_LE(along[along.size() * 99 / 100], 0.6); // measured 0.32-0.45
+            EXPECT_LE(edge_mean, 0.085); // measured 0.055-0.074; 0.071-0.089 with three passes of insertion (fails at 64)
+            EXPECT_LE(along[along.size() * 99 / 100], 0.6); // measured 0.45-0.53
             EXPECT_TRUE(topology(out).watertight());
             EXPECT_EQ(topology(out).euler, 2);
             EXPECT_FALSE(self_intersects(out));
