@@ -2,7 +2,9 @@
 /// @brief Shared fixtures: analytic shapes as fine meshes with their exact distance functions, data paths.
 #pragma once
 
+#include <voxwarp/deform.h>
 #include <voxwarp/edit_file.h>
+#include <voxwarp/mesh_io.h>
 #include <voxwarp/triangle_mesh.h>
 
 #include <cmath>
@@ -185,6 +187,27 @@ inline TriangleMesh subdivided(TriangleMesh m, double longest) {
         }
         m.triangles = std::move(finer);
     }
+}
+
+/// A bundled mesh deformed by a bundled edit file at `resolution` (snapped, the CLI's defaults), and the exact warp
+/// the geometry tests measure it against: the same lattice map on the mesh's vertices after its edges were split
+/// under `edge_voxels` voxels, so that the vertex FFD follows the map between them.
+struct DeformedAndExact {
+    TriangleMesh out, exact;
+    DeformReport report;
+    double h = 0; ///< the voxmap's voxel size
+};
+inline DeformedAndExact deform_with_exact_warp(const std::string& mesh, const std::string& edit, int resolution, double edge_voxels = 1.0) {
+    const TriangleMesh input = read_mesh(data_path(mesh));
+    const EditScript script = read_edit_file(data_path(edit));
+    DeformOptions options;
+    options.voxelize.resolution = resolution;
+    DeformedAndExact r;
+    r.out = deform_mesh(input, script, options, r.report);
+    r.h = r.report.voxel_size;
+    DeformReport exact_report;
+    r.exact = deform_vertices(subdivided(input, edge_voxels * r.h), script, options, exact_report);
+    return r;
 }
 
 using Map = std::function<Eigen::Vector3d(const Eigen::Vector3d&)>;

@@ -138,14 +138,7 @@ TEST(KeepsTopology, TheBundledScanEditFollowsTheExactWarpAt64) {
     // exact warp (the lattice map applied to the scan subdivided to a voxel). The scan is a shell about half a voxel
     // thick there; where the carry thickens a wall, the thick side's vertices lie 0.5-1 voxel off the exact warp,
     // beyond a full snap: p99 0.55 before they moved half a voxel toward their images.
-    const TriangleMesh scan = read_mesh(test::data_path("snowden_lo.obj"));
-    const EditScript script = read_edit_file(test::data_path("snowden_nose.json"));
-    DeformOptions options;
-    options.voxelize.resolution = 64;
-    DeformReport report, exact_report;
-    const TriangleMesh out = deform_mesh(scan, script, options, report);
-    const double h = report.voxel_size;
-    const TriangleMesh exact = deform_vertices(test::subdivided(scan, h), script, options, exact_report);
+    const auto [out, exact, report, h] = test::deform_with_exact_warp("snowden_lo.obj", "snowden_nose.json", 64);
     const DistanceStats d = one_sided_distance(out, exact);
     std::printf("snowden nose edit at 64, output to exact warp: mean %.3f p99 %.3f voxel; %zu vertices snapped, %zu partly, %zu not\n", d.mean / h,
                 d.p99 / h, report.snapped_vertices, report.partly_snapped_vertices, report.unsnapped_vertices);
