@@ -1044,22 +1044,24 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             double best = std::numeric_limits<double>::infinity();
             std::uint32_t nearest = 0;
             Eigen::Vector3d weights;
+            auto distance_to = [&](std::uint32_t f, Eigen::Vector3d& b) { // and the nearest point's weights, b
+                const auto& t = T[f];
+                b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
+                return (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).norm();
+            };
             auto search = [&](double radius) {
                 near_triangles(x - Eigen::Vector3d::Constant(radius), x + Eigen::Vector3d::Constant(radius), candidates);
-                for (const std::uint32_t f : candidates) {
-                    const auto& t = T[f];
-                    const Eigen::Vector3d b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
-                    const double d = (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).norm();
-                    if (d < best || (d == best && f < nearest)) best = d, nearest = f, weights = b; // (the grid's order is not the faces')
-                }
+                Eigen::Vector3d b;
+                for (const std::uint32_t f : candidates)
+                    if (const double d = distance_to(f, b); d < best || (d == best && f < nearest))
+                        best = d, nearest = f, weights = b; // (the grid's order is not the faces')
             };
             // Most points lie on the output already: the triangles in the point's row of three cells (one search of
             // the grid) usually hold one that passes within the chord.
             bool on = false;
             index.row_of_point(x, 1, [&](std::uint32_t f) {
-                const auto& t = T[f];
-                const Eigen::Vector3d b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
-                on = on || (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).squaredNorm() <= chord * chord;
+                Eigen::Vector3d b;
+                on = on || distance_to(f, b) <= chord;
             });
             if (on) {
                 settled[v] = 1;
