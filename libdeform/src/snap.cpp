@@ -875,34 +875,65 @@ public:
         const auto& P = output.vertices;
         const auto& T = output.triangles;
         origin_ = P.empty() ? Eigen::Vector3d::Zero() : P[0];
-        for (const auto& p : P) origin_ = origin_.cwiseMin(p);
+        Eigen::Vector3d top_corner = origin_;
+        for (const auto& p : P) origin_ = origin_.cwiseMin(p), top_corner = top_corner.cwiseMax(p);
+        // Floats hold a middle to about 1e-7 of its distance from the origin (new vertices lie a little beyond).
+        slack_ = 1e-6 * (top_corner - origin_).norm() + 1e-9 * cell_;
         // Cells of middles start at 0 (origin_ is the least corner); rows run along x, one per (y, z).
         std::array<std::int64_t, 3> top{0, 0, 0};
         items_.resize(T.size());
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, T.size(), 4096), [&](const auto& r) {
-            for (std::size_t f = r.begin(); f != r.end(); ++f) items_[f] = {key(middle(output, f)), std::uint32_t(f)};
-        });
-        for (const auto& [k, f] : items_) top[1] = std::max(top[1], std::int64_t(k >> 21 & kMask)), top[2] = std::max(top[2], std::int64_t(k >> 42));
+        radius_ = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, T.size(), 4096), 0.0,
+            [&](const auto& r, double widest) {
+                for (std::size_t f = r.begin(); f != r.end(); ++f) widest = std::max(widest, double((items_[f] = item(output, f)).r));
+                return widest;
+            },
+            [](double a, double b) { return std::max(a, b); });
+        for (const auto& i : items_) top[1] = std::max(top[1], std::int64_t(i.key >> 21 & kMask)), top[2] = std::max(top[2], std::int64_t(i.key >> 42));
         tbb::parallel_sort(items_.begin(), items_.end());
         rows_y_ = top[1] + 1, rows_z_ = top[2] + 1;
         row_start_.assign(std::size_t(rows_y_ * rows_z_ + 1), 0);
-        for (const auto& [k, f] : items_) ++row_start_[std::size_t(row_of(k)) + 1];
+        for (const auto& i : items_) ++row_start_[std::size_t(row_of(i.key)) + 1];
         for (std::size_t r = 1; r < row_start_.size(); ++r) row_start_[r] += row_start_[r - 1];
     }
 
-    /// Calls visit(f) for the triangles f whose middles lie within a cell of the box [lo, hi].
+    /// Calls visit(f) for every triangle f that may meet the box [lo, hi] (those whose cells, grown by the widest
+    /// triangle's radius, meet it), and some others.
     template <class Visit>
     void near(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Visit& visit) const {
-        const auto first = cell_of(lo), last = cell_of(hi);
-        for (std::int64_t z = first[2] - 1; z <= last[2] + 1; ++z)
-            for (std::int64_t y = first[1] - 1; y <= last[1] + 1; ++y) row(y, z, first[0] - 1, last[0] + 1, visit);
+        const Eigen::Vector3d grow = Eigen::Vector3d::Constant(radius_);
+        const auto first = clamped_cell(lo - grow), last = clamped_cell(hi + grow);
+        for (std::int64_t z = first[2]; z <= last[2]; ++z)
+            for (std::int64_t y = first[1]; y <= last[1]; ++y) row(y, z, first[0], last[0], [&](const Item& i) { visit(i.f); });
+    }
+
+    /// Calls visit(f) for every triangle f that may lie within `bound` of p, and some others. visit may lower
+    /// `bound` (the nearest found so far): rows, cells and triangles beyond it are then passed over.
+    template <class Visit>
+    void within(const Eigen::Vector3d& p, const double& bound, const Visit& visit) const {
+        auto reach = [&] { return bound + radius_ + 1e-9 * cell_; };
+        const Eigen::Vector3d grow = Eigen::Vector3d::Constant(reach());
+        const auto first = clamped_cell(p - grow), last = clamped_cell(p + grow);
+        for (std::int64_t z = first[2]; z <= last[2]; ++z) {
+            const double dz = gap(p, 2, z);
+            for (std::int64_t y = first[1]; y <= last[1]; ++y) {
+                const double dy = gap(p, 1, y), r = reach(), left = r * r - dy * dy - dz * dz;
+                if (left < 0) continue;
+                const double dx = std::sqrt(left);
+                const std::int64_t x0 = std::max<std::int64_t>(0, cell_of(p - Eigen::Vector3d(dx, 0, 0))[0]);
+                const std::int64_t x1 = std::max<std::int64_t>(0, cell_of(p + Eigen::Vector3d(dx, 0, 0))[0]);
+                row(y, z, x0, x1, [&](const Item& i) { // the triangle lies within i.r of its middle
+                    if ((origin_ + Eigen::Vector3d(i.x, i.y, i.z) - p).norm() <= bound + double(i.r) + slack_) visit(i.f);
+                });
+            }
+        }
     }
 
     /// Calls visit(f) for the triangles whose middles lie in the cells x0 .. x1 of the row (y, z) of point p's cell.
     template <class Visit>
     void row_of_point(const Eigen::Vector3d& p, std::int64_t reach, const Visit& visit) const {
         const auto c = cell_of(p);
-        row(c[1], c[2], c[0] - reach, c[0] + reach, visit);
+        row(c[1], c[2], c[0] - reach, c[0] + reach, [&](const Item& i) { visit(i.f); });
     }
 
     /// The triangles around vertex v.
@@ -939,17 +970,40 @@ public:
             patches_[std::size_t(patch_[std::size_t(v)])] = std::move(list);
         }
         extra_.clear();
-        for (const std::uint32_t f : moved_) extra_.push_back({key(middle(output, f)), f});
+        for (const std::uint32_t f : moved_) extra_.push_back(item(output, f)), radius_ = std::max(radius_, double(extra_.back().r));
         std::sort(extra_.begin(), extra_.end());
     }
 
 private:
-    using Item = std::pair<std::uint64_t, std::uint32_t>;
+    /// A triangle filed: its cell's key, and the ball around it (for the nearest-triangle search).
+    struct Item {
+        std::uint64_t key;
+        std::uint32_t f;
+        float x, y, z, r; ///< its middle (from origin_) and the distance to its farthest corner (rounded up)
+        bool operator<(const Item& o) const { return key < o.key || (key == o.key && f < o.f); }
+    };
+    Item item(const TriangleMesh& output, std::size_t f) const {
+        const Eigen::Vector3d m = middle(output, f), from = m - origin_;
+        double r = 0;
+        for (const std::int32_t v : output.triangles[f]) r = std::max(r, (output.vertices[std::size_t(v)] - m).norm());
+        return {key(m), std::uint32_t(f), float(from.x()), float(from.y()), float(from.z()), std::nextafter(float(r), std::numeric_limits<float>::infinity())};
+    }
     static constexpr std::uint64_t kMask = (1u << 21) - 1;
 
     static Eigen::Vector3d middle(const TriangleMesh& output, std::size_t f) {
         const auto& t = output.triangles[f];
         return (output.vertices[std::size_t(t[0])] + output.vertices[std::size_t(t[1])] + output.vertices[std::size_t(t[2])]) / 3;
+    }
+    /// The cell of p, as filed: below the origin counts as cell 0 (where a new middle there is filed).
+    std::array<std::int64_t, 3> clamped_cell(const Eigen::Vector3d& p) const {
+        auto c = cell_of(p);
+        for (auto& i : c) i = std::max<std::int64_t>(i, 0);
+        return c;
+    }
+    /// How far p lies from the slab of cells c along `axis` (cell 0 reaching down without end, as filed).
+    double gap(const Eigen::Vector3d& p, int axis, std::int64_t c) const {
+        const double lo = origin_[axis] + double(c) * cell_, hi = lo + cell_;
+        return std::max({0.0, c > 0 ? lo - p[axis] : 0.0, p[axis] - hi});
     }
     std::array<std::int64_t, 3> cell_of(const Eigen::Vector3d& p) const {
         const Eigen::Vector3d q = (p - origin_) / cell_;
@@ -965,6 +1019,7 @@ private:
     }
     std::int64_t row_of(std::uint64_t k) const { return std::int64_t(k >> 42) * rows_y_ + std::int64_t(k >> 21 & kMask); }
 
+    static bool by_key(const Item& i, std::uint64_t k) { return i.key < k; }
     template <class Visit>
     void row(std::int64_t y, std::int64_t z, std::int64_t x0, std::int64_t x1, const Visit& visit) const {
         if (y < 0 || z < 0 || x1 < 0 || y > std::int64_t(kMask) || z > std::int64_t(kMask)) return; // (new middles may lie below the origin: clamped to 0 like the queries)
@@ -973,23 +1028,99 @@ private:
             const std::int64_t r = z * rows_y_ + y;
             const Item* b = items_.data() + row_start_[std::size_t(r)];
             const Item* e = items_.data() + row_start_[std::size_t(r) + 1];
-            for (const Item* it = std::lower_bound(b, e, Item(from, 0)); it != e && it->first <= to; ++it)
-                if (!stale_[it->second]) visit(it->second);
+            for (const Item* it = std::lower_bound(b, e, from, by_key); it != e && it->key <= to; ++it)
+                if (!stale_[it->f]) visit(*it);
         }
-        for (auto it = std::lower_bound(extra_.begin(), extra_.end(), Item(from, 0)); it != extra_.end() && it->first <= to; ++it) visit(it->second);
+        for (auto it = std::lower_bound(extra_.begin(), extra_.end(), from, by_key); it != extra_.end() && it->key <= to; ++it) visit(*it);
     }
 
     Adjacency base_;
     double cell_;
+    double radius_ = 0;      ///< the largest distance from a triangle's middle to a corner, of any triangle filed
     std::size_t base_count_; ///< vertices in base_
     Eigen::Vector3d origin_;
     std::vector<Item> items_, extra_; ///< sorted by key; extra_: the moved triangles' present cells
+    double slack_ = 0;                      ///< what floats round away from a ball
     std::vector<std::uint32_t> row_start_;
     std::int64_t rows_y_ = 0, rows_z_ = 0;
     std::vector<std::int32_t> patch_;                ///< per vertex: its ring in patches_, or -1 (base_)
     std::vector<std::vector<std::uint32_t>> patches_;
     std::vector<char> stale_;                         ///< per triangle: filed in extra_, not items_
     std::vector<std::uint32_t> moved_;
+};
+
+/// Up to N items in place (a split's triangles and pieces: no allocation per point).
+template <class Item, std::size_t N>
+struct Few {
+    std::array<Item, N> items{};
+    std::size_t count = 0;
+    Few() = default;
+    Few(std::initializer_list<Item> list) : count(list.size()) { std::copy(list.begin(), list.end(), items.begin()); }
+    std::size_t size() const { return count; }
+    Item* begin() { return items.data(); }
+    Item* end() { return items.data() + count; }
+    const Item* begin() const { return items.data(); }
+    const Item* end() const { return items.data() + count; }
+    const Item& operator[](std::size_t i) const { return items[i]; }
+};
+
+/// Boxes filed by the cells (of side `cell`, world units) they overlap, to find those that meet a box. The cells
+/// are hashed into a fixed table of lists: cells sharing a slot only cost a box test.
+class BoxGrid {
+public:
+    explicit BoxGrid(double cell) : cell_(cell), head_(kSlots, -1) {}
+    void clear() {
+        for (const auto& e : entries_) head_[e.slot] = -1;
+        boxes_.clear(), seen_.clear(), entries_.clear();
+    }
+    /// Files box b = the number of boxes added before it.
+    void add(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+        const std::uint32_t b = std::uint32_t(boxes_.size());
+        boxes_.push_back({lo, hi}), seen_.push_back(0);
+        each_slot(lo, hi, [&](std::uint32_t slot) {
+            entries_.push_back({b, slot, head_[slot]});
+            head_[slot] = std::int32_t(entries_.size() - 1);
+        });
+    }
+    /// Whether test(b) holds for some box b that meets [lo, hi]; each is tested once at most.
+    template <class Test>
+    bool any_meeting(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Test& test) {
+        ++query_;
+        bool hit = false;
+        each_slot(lo, hi, [&](std::uint32_t slot) {
+            for (std::int32_t e = head_[slot]; e >= 0 && !hit; e = entries_[std::size_t(e)].next) {
+                const std::uint32_t b = entries_[std::size_t(e)].box;
+                if (seen_[b] == query_) continue;
+                seen_[b] = query_;
+                const auto& [blo, bhi] = boxes_[b];
+                hit = (lo.array() <= bhi.array()).all() && (blo.array() <= hi.array()).all() && test(std::size_t(b));
+            }
+        });
+        return hit;
+    }
+
+private:
+    static constexpr std::uint32_t kSlots = 1u << 17;
+    template <class Visit>
+    void each_slot(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Visit& visit) const {
+        const Eigen::Array3d a = (lo / cell_).array().floor(), b = (hi / cell_).array().floor();
+        for (double z = a.z(); z <= b.z(); ++z)
+            for (double y = a.y(); y <= b.y(); ++y)
+                for (double x = a.x(); x <= b.x(); ++x)
+                    visit(std::uint32_t((std::uint64_t(std::int64_t(x)) * 73856093u ^ std::uint64_t(std::int64_t(y)) * 19349663u ^
+                                         std::uint64_t(std::int64_t(z)) * 83492791u) &
+                                        (kSlots - 1)));
+    }
+    struct Entry {
+        std::uint32_t box, slot;
+        std::int32_t next; ///< the slot's next entry, or -1
+    };
+    double cell_;
+    std::vector<std::int32_t> head_; ///< per slot: its last entry, or -1
+    std::vector<Entry> entries_;
+    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes_;
+    std::vector<std::uint64_t> seen_; ///< per box: the last query that tested it
+    std::uint64_t query_ = 0;
 };
 
 /// The input's corners and crease points (feature_points) put into the output. Where creases meet at a tip, the
@@ -1008,7 +1139,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
                           const std::vector<FeaturePoint>& points, std::vector<char>& settled, double chord, double reach, OutputIndex& index) {
     std::vector<Eigen::Vector3d>& P = output.vertices;
     auto& T = output.triangles;
-    const std::size_t nf = T.size(), ni = points.size();
+    const std::size_t ni = points.size();
     auto near_triangles = [&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::vector<std::uint32_t>& out) {
         out.clear();
         index.near(lo, hi, [&](std::uint32_t f) { out.push_back(f); });
@@ -1025,192 +1156,216 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
     };
     constexpr std::int32_t kNew = -1; // the point's new vertex, in a piece
     struct Insert {
-        std::vector<std::uint32_t> triangles;              // those it replaces (one, or the two of a side)
-        std::vector<std::array<std::int32_t, 3>> pieces;   // two or three per triangle, in order
+        Few<std::uint32_t, 2> triangles;               // those it replaces (one, or the two of a side)
+        Few<std::array<std::int32_t, 3>, 4> pieces;    // two or three per triangle, in order
         Eigen::Vector3d at;
         SourcePoint source;
     };
-    std::vector<std::optional<Insert>> found(ni);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ni, 256), [&](const auto& r) {
-        std::vector<std::uint32_t> candidates, other;
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            if (settled[v]) continue;
-            const FeaturePoint& point = points[v];
-            const std::uint32_t* faces = point.faces.data();
-            const std::size_t count = point.count;
-            const Eigen::Vector3d& x = point.image;
-            // The nearest output triangle within reach. A point the output passes within the chord of, or none
-            // within reach of, is done with (putting points in near it does not move the output away from it).
-            double best = std::numeric_limits<double>::infinity();
-            std::uint32_t nearest = 0;
-            Eigen::Vector3d weights;
-            auto distance_to = [&](std::uint32_t f, Eigen::Vector3d& b) { // and the nearest point's weights, b
-                const auto& t = T[f];
-                b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
-                return (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).norm();
-            };
-            auto search = [&](double radius) {
-                near_triangles(x - Eigen::Vector3d::Constant(radius), x + Eigen::Vector3d::Constant(radius), candidates);
-                Eigen::Vector3d b;
-                for (const std::uint32_t f : candidates)
-                    if (const double d = distance_to(f, b); d < best || (d == best && f < nearest))
-                        best = d, nearest = f, weights = b; // (the grid's order is not the faces')
-            };
-            // Most points lie on the output already: the triangles in the point's row of three cells (one search of
-            // the grid) usually hold one that passes within the chord.
-            bool on = false;
-            index.row_of_point(x, 1, [&](std::uint32_t f) {
-                Eigen::Vector3d b;
-                on = on || distance_to(f, b) <= chord;
-            });
-            if (on) {
-                settled[v] = 1;
-                continue;
+    // The split each waiting point proposes (its nearest triangle's), from the output as the pass found it.
+    auto propose = [&](std::size_t v) -> std::optional<Insert> {
+        const FeaturePoint& point = points[v];
+        const Eigen::Vector3d& x = point.image;
+        // The nearest output triangle within reach. A point the output passes within the chord of, or none
+        // within reach of, is done with (putting points in near it does not move the output away from it).
+        double best = std::numeric_limits<double>::infinity();
+        std::uint32_t nearest = 0;
+        Eigen::Vector3d weights;
+        auto distance_to = [&](std::uint32_t f, Eigen::Vector3d& b) { // and the nearest point's weights, b
+            const auto& t = T[f];
+            b = closest_barycentric(x, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
+            return (b[0] * P[std::size_t(t[0])] + b[1] * P[std::size_t(t[1])] + b[2] * P[std::size_t(t[2])] - x).norm();
+        };
+        auto consider = [&](std::uint32_t f) {
+            Eigen::Vector3d b;
+            if (const double d = distance_to(f, b); d < best || (d == best && f < nearest))
+                best = d, nearest = f, weights = b; // (the grid's order is not the faces')
+        };
+        // Most points lie on the output already: the triangles in the point's row of three cells (one search of
+        // the grid) usually hold one that passes within the chord. Otherwise the nearest of those bounds the
+        // search for the nearest of all.
+        index.row_of_point(x, 1, consider);
+        if (best <= chord) {
+            settled[v] = 1;
+            return std::nullopt;
+        }
+        double bound = std::min(best, reach);
+        index.within(x, bound, [&](std::uint32_t f) {
+            consider(f);
+            bound = std::min(best, reach);
+        });
+        if (!(best > chord && best <= reach)) {
+            settled[v] = 1;
+            return std::nullopt;
+        }
+        Insert in;
+        in.at = x;
+        const auto& t = T[nearest];
+        int least = 0; // the corner opposite the side it lies nearest
+        for (int k = 1; k < 3; ++k)
+            if (weights[k] < weights[least]) least = k;
+        if (weights[least] < kCornerSide) {
+            const std::int32_t a = t[std::size_t((least + 1) % 3)], b = t[std::size_t((least + 2) % 3)], c = t[std::size_t(least)];
+            const std::int64_t g = across(nearest, a, b);
+            if (g < 0) return std::nullopt;
+            const auto& u = T[std::size_t(g)];
+            const std::int32_t y = u[0] != a && u[0] != b ? u[0] : u[1] != a && u[1] != b ? u[1] : u[2];
+            in.triangles = {nearest, std::uint32_t(g)};
+            in.pieces = {{a, kNew, c}, {kNew, b, c}, {b, kNew, y}, {kNew, a, y}};
+        } else {
+            in.triangles = {nearest};
+            in.pieces = {{t[0], t[1], kNew}, {t[1], t[2], kNew}, {t[2], t[0], kNew}};
+        }
+        // Not where a piece would turn over, look away from the point's faces, or fold back onto a neighbour.
+        auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return i == kNew ? x : P[std::size_t(i)]; };
+        const std::uint32_t* faces = point.faces.data();
+        const std::size_t count = point.count;
+        auto normal_of = [&](const std::array<std::int32_t, 3>& p) { return Eigen::Vector3d((at(p[1]) - at(p[0])).cross(at(p[2]) - at(p[0]))); };
+        std::array<Eigen::Vector3d, FeaturePoint::kFaces> exact{};
+        for (std::size_t a = 0; a < count; ++a) exact[a] = surface.normal[faces[a]];
+        exact = push_normals<FeaturePoint::kFaces>(steps, point.at, exact);
+        bool folds = false;
+        for (std::size_t q = 0; q < in.pieces.size() && !folds; ++q) {
+            const auto& p = in.pieces[q];
+            const Eigen::Vector3d before = face_normal(T[in.triangles[q * in.triangles.size() / in.pieces.size()]]), after = normal_of(p);
+            // Turned over against its triangle, or next to no area.
+            folds = after.dot(before) <= 0 || after.norm() < 1e-4 * chord * chord;
+            // Facing away from every face of the point, as the map carries them.
+            bool along = false;
+            for (std::size_t a = 0; a < count; ++a) along |= after.dot(exact[a]) > 0;
+            folds |= !along;
+            // Folded back onto the neighbour across an old side (a tip's sides may stand at a right angle to
+            // the surface around it, and more: the ear's rim turns by 105 degrees).
+            for (int k = 0; k < 3 && !folds; ++k) {
+                const std::int32_t a = p[std::size_t(k)], b = p[std::size_t((k + 1) % 3)];
+                if (a == kNew || b == kNew) continue;
+                const std::int64_t g = across(in.triangles[0], a, b);
+                if (g < 0 || std::find(in.triangles.begin(), in.triangles.end(), std::uint32_t(g)) != in.triangles.end()) continue;
+                folds = !(after.normalized().dot(face_normal(T[std::size_t(g)]).normalized()) > -kCornerFold);
             }
-            search(0); // the cells next to the point's
-            if (best > chord) search(reach);
-            if (!(best > chord && best <= reach)) {
-                settled[v] = 1;
-                continue;
-            }
-            Insert in;
-            in.at = x;
-            const auto& t = T[nearest];
-            int least = 0; // the corner opposite the side it lies nearest
-            for (int k = 1; k < 3; ++k)
-                if (weights[k] < weights[least]) least = k;
-            if (weights[least] < kCornerSide) {
-                const std::int32_t a = t[std::size_t((least + 1) % 3)], b = t[std::size_t((least + 2) % 3)], c = t[std::size_t(least)];
-                const std::int64_t g = across(nearest, a, b);
-                if (g < 0) continue;
-                const auto& u = T[std::size_t(g)];
-                const std::int32_t y = u[0] != a && u[0] != b ? u[0] : u[1] != a && u[1] != b ? u[1] : u[2];
-                in.triangles = {nearest, std::uint32_t(g)};
-                in.pieces = {{a, kNew, c}, {kNew, b, c}, {b, kNew, y}, {kNew, a, y}};
-            } else {
-                in.triangles = {nearest};
-                in.pieces = {{t[0], t[1], kNew}, {t[1], t[2], kNew}, {t[2], t[0], kNew}};
-            }
-            auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return i == kNew ? x : P[std::size_t(i)]; };
-            auto normal_of = [&](const std::array<std::int32_t, 3>& p) { return Eigen::Vector3d((at(p[1]) - at(p[0])).cross(at(p[2]) - at(p[0]))); };
-            std::array<Eigen::Vector3d, FeaturePoint::kFaces> exact{};
-            for (std::size_t a = 0; a < count; ++a) exact[a] = surface.normal[faces[a]];
-            exact = push_normals<FeaturePoint::kFaces>(steps, point.at, exact);
-            bool folds = false;
-            for (std::size_t q = 0; q < in.pieces.size() && !folds; ++q) {
-                const auto& p = in.pieces[q];
-                const Eigen::Vector3d before = face_normal(T[in.triangles[q * in.triangles.size() / in.pieces.size()]]), after = normal_of(p);
-                // Turned over against its triangle, or next to no area.
-                folds = after.dot(before) <= 0 || after.norm() < 1e-4 * chord * chord;
-                // Facing away from every face of the point, as the map carries them.
-                bool along = false;
-                for (std::size_t a = 0; a < count; ++a) along |= after.dot(exact[a]) > 0;
-                folds |= !along;
-                // Folded back onto the neighbour across an old side (a tip's sides may stand at a right angle to
-                // the surface around it, and more: the ear's rim turns by 105 degrees).
-                for (int k = 0; k < 3 && !folds; ++k) {
+        }
+        if (folds) return std::nullopt;
+        in.source = point.source;
+        return in;
+    };
+    // Whether a proposed split's pieces cross the output as the pass found it: the triangles that may meet their
+    // box, against the pieces' new sides, and the pieces against the triangles' sides (a test against the other
+    // sheet's tangent plane would refuse a thin part's rim, whose tip lies beyond both sheets' planes).
+    auto crosses_output = [&](const Insert& in, std::vector<std::uint32_t>& other) {
+        const Eigen::Vector3d& x = in.at;
+        auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return i == kNew ? x : P[std::size_t(i)]; };
+        Eigen::Vector3d lo = x, hi = x; // the pieces' box
+        for (const std::uint32_t f : in.triangles)
+            for (const std::int32_t c : T[f]) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
+        near_triangles(lo, hi, other);
+        auto segment_meets = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+            const double u = internal::line_meets_triangle(p, q - p, a, b, c);
+            return u >= 0 && u <= 1;
+        };
+        bool crosses = false;
+        for (const std::uint32_t f : other) {
+            if (std::find(in.triangles.begin(), in.triangles.end(), f) != in.triangles.end()) continue;
+            const auto& u = T[f];
+            const Eigen::Vector3d &u0 = P[std::size_t(u[0])], &u1 = P[std::size_t(u[1])], &u2 = P[std::size_t(u[2])];
+            if ((u0.cwiseMax(u1).cwiseMax(u2).array() < lo.array()).any() || (u0.cwiseMin(u1).cwiseMin(u2).array() > hi.array()).any()) continue;
+            auto has = [&](std::int32_t i) { return std::find(u.begin(), u.end(), i) != u.end(); };
+            for (const auto& p : in.pieces) {
+                for (int k = 0; k < 3 && !crosses; ++k) {
                     const std::int32_t a = p[std::size_t(k)], b = p[std::size_t((k + 1) % 3)];
-                    if (a == kNew || b == kNew) continue;
-                    const std::int64_t g = across(in.triangles[0], a, b);
-                    if (g < 0 || std::find(in.triangles.begin(), in.triangles.end(), std::uint32_t(g)) != in.triangles.end()) continue;
-                    folds = !(after.normalized().dot(face_normal(T[std::size_t(g)]).normalized()) > -kCornerFold);
-                }
-            }
-            if (folds) continue;
-            // The pieces must not cross the output: the triangles whose middles lie within a cell of their box,
-            // against the pieces' new sides, and the pieces against the triangles' sides (a test against the
-            // other sheet's tangent plane would refuse a thin part's rim, whose tip lies beyond both sheets' planes).
-            Eigen::Vector3d lo = x, hi = x; // the pieces' box
-            for (const std::uint32_t f : in.triangles)
-                for (const std::int32_t c : T[f]) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
-            near_triangles(lo, hi, other);
-            auto segment_meets = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-                const double u = internal::line_meets_triangle(p, q - p, a, b, c);
-                return u >= 0 && u <= 1;
-            };
-            bool crosses = false;
-            for (const std::uint32_t f : other) {
-                if (std::find(in.triangles.begin(), in.triangles.end(), f) != in.triangles.end()) continue;
-                const auto& u = T[f];
-                const Eigen::Vector3d &u0 = P[std::size_t(u[0])], &u1 = P[std::size_t(u[1])], &u2 = P[std::size_t(u[2])];
-                if ((u0.cwiseMax(u1).cwiseMax(u2).array() < lo.array()).any() || (u0.cwiseMin(u1).cwiseMin(u2).array() > hi.array()).any()) continue;
-                auto has = [&](std::int32_t i) { return std::find(u.begin(), u.end(), i) != u.end(); };
-                for (const auto& p : in.pieces) {
-                    for (int k = 0; k < 3 && !crosses; ++k) {
-                        const std::int32_t a = p[std::size_t(k)], b = p[std::size_t((k + 1) % 3)];
-                        // The piece's new sides against the triangle, unless they meet at a corner.
-                        if (b == kNew && !has(a)) crosses |= segment_meets(at(a), x, P[std::size_t(u[0])], P[std::size_t(u[1])], P[std::size_t(u[2])]);
-                        // The triangle's sides against the piece, unless they share a corner.
-                        const std::int32_t e0 = u[std::size_t(k)], e1 = u[std::size_t((k + 1) % 3)];
-                        if (std::find(p.begin(), p.end(), e0) == p.end() && std::find(p.begin(), p.end(), e1) == p.end())
-                            crosses |= segment_meets(P[std::size_t(e0)], P[std::size_t(e1)], at(p[0]), at(p[1]), at(p[2]));
-                    }
-                    if (crosses) break;
+                    // The piece's new sides against the triangle, unless they meet at a corner.
+                    if (b == kNew && !has(a)) crosses |= segment_meets(at(a), x, P[std::size_t(u[0])], P[std::size_t(u[1])], P[std::size_t(u[2])]);
+                    // The triangle's sides against the piece, unless they share a corner.
+                    const std::int32_t e0 = u[std::size_t(k)], e1 = u[std::size_t((k + 1) % 3)];
+                    if (std::find(p.begin(), p.end(), e0) == p.end() && std::find(p.begin(), p.end(), e1) == p.end())
+                        crosses |= segment_meets(P[std::size_t(e0)], P[std::size_t(e1)], at(p[0]), at(p[1]), at(p[2]));
                 }
                 if (crosses) break;
             }
-            if (crosses) continue;
-            in.source = point.source;
-            found[v] = std::move(in);
+            if (crosses) break;
         }
+        return crosses;
+    };
+    std::vector<std::optional<Insert>> found(ni);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ni, 256), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v)
+            if (!settled[v]) found[v] = propose(v);
     });
-    std::vector<char> taken(nf, 0);
-    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes; // of the pieces put in this pass, per point
-    std::vector<std::array<std::int32_t, 3>> put;                    // those pieces
-    std::vector<std::size_t> put_from{0};                            // point b's pieces: put[put_from[b] .. put_from[b + 1])
-    std::size_t added = 0;
-    std::vector<std::uint32_t> changed; // triangles replaced or added
-    for (std::size_t v = 0; v < ni; ++v) {
-        if (!found[v]) continue;
-        const Insert& in = *found[v];
-        // A triangle already split, or one beside it (its side's split would leave the other's neighbour stale).
-        // (A taken triangle may hold this round's new vertices, which have no ring: it is looked at first.)
-        auto busy = [&] {
-            for (const std::uint32_t f : in.triangles)
-                if (taken[f]) return true;
-            for (const std::uint32_t f : in.triangles)
-                for (const std::int32_t c : T[f]) {
-                    const auto [b0, e0] = index.ring(std::size_t(c));
-                    for (const std::uint32_t* q = b0; q != e0; ++q)
-                        if (taken[*q]) return true;
-                }
-            return false;
-        };
-        if (busy()) continue;
-        // The pieces were tested against the output as it was: test them against those put in since.
-        const auto x = std::int32_t(P.size());
-        std::vector<std::array<std::int32_t, 3>> pieces = in.pieces;
-        for (auto& piece : pieces)
-            for (auto& i : piece)
-                if (i == kNew) i = x;
-        P.push_back(in.at);
-        Eigen::Vector3d lo = in.at, hi = in.at;
-        for (const auto& piece : pieces)
-            for (const std::int32_t c : piece) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
-        bool crosses = false;
-        for (std::size_t b = 0; b < boxes.size() && !crosses; ++b) {
-            if (!((lo.array() <= boxes[b].second.array()).all() && (boxes[b].first.array() <= hi.array()).all())) continue;
+    // The points go in in order, each unless it is unsound, its triangles or one beside them were split already, or
+    // its pieces cross those put in before it. Only the points that order reaches need the soundness test, a few
+    // of those proposed where points crowd (a scan's every vertex and edge): the selection is made taking untested
+    // points as sound, those it takes are tested (in parallel), and it is made again until it takes no untested
+    // point; it is then the selection that tests every point first would make.
+    enum : char { untested, passed, failed };
+    std::vector<char> verdict(ni, untested);
+    const std::size_t n0 = P.size();
+    std::vector<char> taken(n0, 0); // the corners of the triangles split
+    std::vector<std::size_t> selected, unknown;
+    BoxGrid boxes(reach);
+    std::vector<std::array<std::int32_t, 3>> put; // the pieces of the points selected, point b's put[put_from[b] ..]
+    std::vector<std::size_t> put_from;
+    for (;;) {
+        std::fill(taken.begin(), taken.end(), 0);
+        selected.clear(), unknown.clear(), put.clear(), put_from.assign(1, 0), boxes.clear();
+        P.resize(n0);
+        for (std::size_t v = 0; v < ni; ++v) {
+            if (!found[v] || verdict[v] == failed) continue;
+            const Insert& in = *found[v];
+            // A triangle already split, or one beside it (its side's split would leave the other's neighbour stale):
+            // a corner of its triangles is a corner of a taken one.
+            auto busy = [&] {
+                for (const std::uint32_t f : in.triangles)
+                    for (const std::int32_t c : T[f])
+                        if (taken[std::size_t(c)]) return true;
+                return false;
+            };
+            if (busy()) continue;
+            // The pieces were tested against the output as it was: test them against those put in since.
+            const auto x = std::int32_t(P.size());
+            auto pieces = in.pieces;
+            for (auto& piece : pieces)
+                for (auto& i : piece)
+                    if (i == kNew) i = x;
+            P.push_back(in.at);
+            Eigen::Vector3d lo = in.at, hi = in.at;
             for (const auto& piece : pieces)
-                for (std::size_t q = put_from[b]; q < put_from[b + 1] && !crosses; ++q) crosses = triangles_cross(P, piece, put[q]);
+                for (const std::int32_t c : piece) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
+            const bool crosses = boxes.any_meeting(lo, hi, [&](std::size_t b) {
+                for (const auto& piece : pieces)
+                    for (std::size_t q = put_from[b]; q < put_from[b + 1]; ++q)
+                        if (triangles_cross(P, piece, put[q])) return true;
+                return false;
+            });
+            if (crosses) {
+                P.pop_back();
+                continue;
+            }
+            boxes.add(lo, hi);
+            put.insert(put.end(), pieces.begin(), pieces.end());
+            put_from.push_back(put.size());
+            for (const std::uint32_t f : in.triangles)
+                for (const std::int32_t c : T[f]) taken[std::size_t(c)] = 1;
+            selected.push_back(v);
+            if (verdict[v] == untested) unknown.push_back(v);
         }
-        if (crosses) {
-            P.pop_back();
-            continue;
-        }
-        boxes.push_back({lo, hi});
-        put.insert(put.end(), pieces.begin(), pieces.end());
-        put_from.push_back(put.size());
-        for (const std::uint32_t f : in.triangles) taken[f] = 1;
+        if (unknown.empty()) break;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, unknown.size(), 16), [&](const auto& r) {
+            std::vector<std::uint32_t> other;
+            for (std::size_t i = r.begin(); i != r.end(); ++i) verdict[unknown[i]] = crosses_output(*found[unknown[i]], other) ? failed : passed;
+        });
+    }
+    // P holds the selected points' vertices, in order; their pieces replace their triangles.
+    std::vector<std::uint32_t> changed; // triangles replaced or added
+    for (std::size_t b = 0; b < selected.size(); ++b) {
+        const Insert& in = *found[selected[b]];
         sources.push_back(in.source);
-        const std::size_t per = pieces.size() / in.triangles.size();
-        for (std::size_t q = 0; q < pieces.size(); ++q) {
-            if (q % per == 0) T[in.triangles[q / per]] = pieces[q], changed.push_back(in.triangles[q / per]);
-            else changed.push_back(std::uint32_t(T.size())), T.push_back(pieces[q]);
+        const std::size_t per = (put_from[b + 1] - put_from[b]) / in.triangles.size();
+        for (std::size_t q = 0; q < put_from[b + 1] - put_from[b]; ++q) {
+            const auto& piece = put[put_from[b] + q];
+            if (q % per == 0) T[in.triangles[q / per]] = piece, changed.push_back(in.triangles[q / per]);
+            else changed.push_back(std::uint32_t(T.size())), T.push_back(piece);
         }
-        ++added;
     }
     index.update(output, changed);
-    return added;
+    return selected.size();
 }
 
 /// refine_to_sources, its first round with `first` (computed when empty).
