@@ -1238,7 +1238,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             for (int k = 0; k < 3 && !folds; ++k) {
                 const std::int32_t a = p[std::size_t(k)], b = p[std::size_t((k + 1) % 3)];
                 if (a == kNew || b == kNew) continue;
-                const std::int64_t g = across(in.triangles[0], a, b);
+                const std::int64_t g = across(in.triangles[q * in.triangles.size() / in.pieces.size()], a, b);
                 if (g < 0 || std::find(in.triangles.begin(), in.triangles.end(), std::uint32_t(g)) != in.triangles.end()) continue;
                 folds = !(after.normalized().dot(face_normal(T[std::size_t(g)]).normalized()) > -kCornerFold);
             }
