@@ -749,6 +749,12 @@ constexpr double kCreaseSpacing = 0.5;
 /// An input vertex whose faces meet at more than this angle (degrees) is a corner: a tip, or where creases meet.
 constexpr double kCornerAngle = 10;
 
+/// Whether the segment p-q passes through triangle abc.
+bool segment_meets(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const double u = internal::line_meets_triangle(p, q - p, a, b, c);
+    return u >= 0 && u <= 1;
+}
+
 /// Whether triangles a and b (vertex indices into P) cross: a side of either passes through the other, sides that
 /// share a corner with the other not counted (they meet there).
 bool triangles_cross(const std::vector<Eigen::Vector3d>& P, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b) {
@@ -756,9 +762,7 @@ bool triangles_cross(const std::vector<Eigen::Vector3d>& P, const std::array<std
         for (int k = 0; k < 3; ++k) {
             const std::int32_t e0 = s[std::size_t(k)], e1 = s[std::size_t((k + 1) % 3)];
             if (std::find(t.begin(), t.end(), e0) != t.end() || std::find(t.begin(), t.end(), e1) != t.end()) continue;
-            const Eigen::Vector3d &p = P[std::size_t(e0)], &q = P[std::size_t(e1)];
-            const double u = internal::line_meets_triangle(p, q - p, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
-            if (u >= 0 && u <= 1) return true;
+            if (segment_meets(P[std::size_t(e0)], P[std::size_t(e1)], P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])])) return true;
         }
         return false;
     };
@@ -1226,7 +1230,8 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
         bool folds = false;
         for (std::size_t q = 0; q < in.pieces.size() && !folds; ++q) {
             const auto& p = in.pieces[q];
-            const Eigen::Vector3d before = face_normal(T[in.triangles[q * in.triangles.size() / in.pieces.size()]]), after = normal_of(p);
+            const std::uint32_t own = in.triangles[q * in.triangles.size() / in.pieces.size()]; // the piece's triangle
+            const Eigen::Vector3d before = face_normal(T[own]), after = normal_of(p);
             // Turned over against its triangle, or next to no area.
             folds = after.dot(before) <= 0 || after.norm() < 1e-4 * chord * chord;
             // Facing away from every face of the point, as the map carries them.
@@ -1238,7 +1243,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             for (int k = 0; k < 3 && !folds; ++k) {
                 const std::int32_t a = p[std::size_t(k)], b = p[std::size_t((k + 1) % 3)];
                 if (a == kNew || b == kNew) continue;
-                const std::int64_t g = across(in.triangles[q * in.triangles.size() / in.pieces.size()], a, b);
+                const std::int64_t g = across(own, a, b);
                 if (g < 0 || std::find(in.triangles.begin(), in.triangles.end(), std::uint32_t(g)) != in.triangles.end()) continue;
                 folds = !(after.normalized().dot(face_normal(T[std::size_t(g)]).normalized()) > -kCornerFold);
             }
@@ -1257,10 +1262,6 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
         for (const std::uint32_t f : in.triangles)
             for (const std::int32_t c : T[f]) lo = lo.cwiseMin(P[std::size_t(c)]), hi = hi.cwiseMax(P[std::size_t(c)]);
         near_triangles(lo, hi, other);
-        auto segment_meets = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-            const double u = internal::line_meets_triangle(p, q - p, a, b, c);
-            return u >= 0 && u <= 1;
-        };
         bool crosses = false;
         for (const std::uint32_t f : other) {
             if (std::find(in.triangles.begin(), in.triangles.end(), f) != in.triangles.end()) continue;
