@@ -41,6 +41,31 @@ TEST(WindingNumber, HierarchyMatchesExactSum) {
     EXPECT_GT(w({0, 0, 0.2}), 0.5);
 }
 
+TEST(WindingNumber, NearTheSurfaceEveryTurnIsCounted) {
+    // Points a hair from a closed sphere's faces, and from a box's large faces: there the nearby triangles' solid
+    // angles add up to whole turns (the near field is summed as one complex product, whose turns about the origin
+    // are counted), and a box face seen from right above it subtends nearly a half sphere (summed on its own).
+    const TriangleMesh sphere = test::sphere_mesh({0, 0, 0}, 1.0, 3);
+    const TriangleMesh box = test::box_mesh({-1, -1, -1}, {1, 1, 1}, 1);
+    std::mt19937 rng(5);
+    std::normal_distribution<double> g;
+    for (const TriangleMesh* mesh : {&sphere, &box}) {
+        const WindingNumber w(*mesh);
+        for (int i = 0; i < 200; ++i) {
+            const auto& t = mesh->triangles[std::size_t(i) % mesh->triangles.size()];
+            const Eigen::Vector3d a = mesh->vertices[std::size_t(t[0])], b = mesh->vertices[std::size_t(t[1])], c = mesh->vertices[std::size_t(t[2])];
+            const Eigen::Vector3d normal = (b - a).cross(c - a).normalized();
+            const Eigen::Vector3d on = (a + b + c) / 3 + 0.05 * std::abs(g(rng)) * (b - a) + 0.05 * std::abs(g(rng)) * (c - a);
+            for (const double offset : {1e-3, 1e-6}) {
+                SCOPED_TRACE("triangle " + std::to_string(i) + ", offset " + std::to_string(offset));
+                EXPECT_NEAR(w(on - offset * normal), 1.0, 0.03);
+                EXPECT_NEAR(w(on + offset * normal), 0.0, 0.03);
+                EXPECT_NEAR(w.exact(on - offset * normal), 1.0, 1e-6);
+            }
+        }
+    }
+}
+
 TEST(WindingNumber, SegmentCrossingsAreWhereTheSegmentMeetsTheSurface) {
     const TriangleMesh box = test::box_mesh({-1, -1, -1}, {1, 1, 1}, 4);
     const WindingNumber w(box);
