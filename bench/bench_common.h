@@ -13,4 +13,10 @@ inline const TriangleMesh& bunny_mesh() {
     return mesh;
 }
 
+/// The snowden bust, an open scan (holes, overlapping layers): the winding-number path.
+inline const TriangleMesh& scan_mesh() {
+    static const TriangleMesh mesh = read_mesh(std::string(VOXWARP_DATA_DIR) + "/snowden_lo.obj");
+    return mesh;
+}
+
 } // namespace voxwarp::bench

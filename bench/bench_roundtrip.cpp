@@ -24,4 +24,11 @@ static void BM_RoundTrip(benchmark::State& state) {
 }
 BENCHMARK(BM_RoundTrip)->Arg(128)->Arg(256)->Arg(512)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// An open scan voxelized: the sign comes from winding numbers (about half the time at 128), as no flood fill can
+// sign an open surface. Compare builds by running both in turn (docs/benchmarks.md).
+static void BM_VoxelizeScan(benchmark::State& state) {
+    for (auto _ : state) benchmark::DoNotOptimize(voxelize_sparse(scan_mesh(), {.resolution = int(state.range(0)), .sign = SignMethod::winding_number}));
+}
+BENCHMARK(BM_VoxelizeScan)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 } // namespace voxwarp::bench
