@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <Eigen/Geometry>
 
 #include <algorithm>
@@ -216,6 +218,15 @@ TEST(Deform, MissesOffTheModelAreExplained) {
     const auto warnings = deform_warnings(report);
     ASSERT_FALSE(warnings.empty());
     EXPECT_NE(warnings[0].find("edits[0].constraints[0]: the surface misses the target by"), std::string::npos) << warnings[0];
+    // A point deep inside, beyond the 16 voxels the distances are measured within: said so, not "inf voxels".
+    EditScript deep;
+    deep.edits.push_back({{move({0, 0, 0}, {0.1, 0, 0}, "edits[0].constraints[0]"), pin({-1, 0, 0})}});
+    DeformReport deep_report;
+    deform_mesh(sphere, deep, options, deep_report);
+    const auto& inside = deep_report.edits[0].constraints[0];
+    EXPECT_FALSE(std::isfinite(inside.model_miss_voxels)); // 24 voxels from the sphere
+    EXPECT_NE(inside.miss_cause.find("the point lies more than 16 voxels off the model's surface"), std::string::npos) << inside.miss_cause;
+    for (const auto& w : deform_warnings(deep_report)) EXPECT_EQ(w.find("inf"), std::string::npos) << w;
 }
 
 TEST(Deform, TargetsCloseTogetherPulledApartAreReported) {

@@ -374,6 +374,14 @@ const ThinPart* lost_under(const Eigen::Vector3d& point, const std::vector<ThinP
     return nullptr;
 }
 
+/// "0.73 voxels", or "more than 16 voxels" for a distance measured as none within kMissReach (infinite).
+std::string voxels_off(double voxels) {
+    char text[64];
+    if (std::isfinite(voxels)) std::snprintf(text, sizeof text, "%.2f voxels", voxels);
+    else std::snprintf(text, sizeof text, "more than %g voxels", kMissReach);
+    return text;
+}
+
 /// Why the surface misses a move's target by more than half a voxel, where the measures tell; `parts` are the
 /// thin parts lost, once known, `stage` this edit's name among them, `h` the voxel size.
 void explain_misses(EditReport& er, const std::vector<Constraint>& constraints, double h, const std::vector<ThinPart>& parts = {},
@@ -387,8 +395,8 @@ void explain_misses(EditReport& er, const std::vector<Constraint>& constraints, 
         if (cr.residual_voxels > 0.5) {
             std::snprintf(text, sizeof text, "the constraints conflict: the lattice map itself misses by %.2f voxels (least squares)", cr.residual_voxels);
         } else if (cr.model_miss_voxels > 0.5) {
-            std::snprintf(text, sizeof text, "the point lies %.2f voxels off the model's surface: the edit takes the point, not the surface, to the target",
-                          cr.model_miss_voxels);
+            std::snprintf(text, sizeof text, "the point lies %s off the model's surface: the edit takes the point, not the surface, to the target",
+                          voxels_off(cr.model_miss_voxels).c_str());
         } else if (on_model && cr.source_thin) {
             std::snprintf(text, sizeof text, "the point lies on a feature thinner than a voxel, which the voxmap does not hold; raise the resolution");
         } else if (on_model && cr.source_miss_voxels > 0.25) {
@@ -398,7 +406,7 @@ void explain_misses(EditReport& er, const std::vector<Constraint>& constraints, 
         } else if (const ThinPart* part = lost_under(constraints[c].to, parts, stage, 1.5 * h)) {
             std::snprintf(text, sizeof text, "the edit squeezes the part there to %.2f voxel, and the voxmap loses it (see thin parts)", part->thickness_voxels);
         } else if (cr.source_miss_voxels > 0.5) {
-            std::snprintf(text, sizeof text, "the point lies %.2f voxels off the surface the edit starts from", cr.source_miss_voxels);
+            std::snprintf(text, sizeof text, "the point lies %s off the surface the edit starts from", voxels_off(cr.source_miss_voxels).c_str());
         } else {
             continue;
         }
