@@ -631,6 +631,17 @@ TEST(Voxelize, RejectsImpossibleRequests) {
     EXPECT_THROW(voxelize(degenerate, {}), InvalidInput);
     EXPECT_THROW(voxelize(box, {.resolution = 2000, .max_memory_bytes = 1 << 20}), ResourceLimit);
     EXPECT_THROW(voxelize(TriangleMesh{}, {}), InvalidInput);
+    // Coordinates whose squares overflow (areas, the box's extent): refused by name, not an "inf voxel size".
+    TriangleMesh huge = box;
+    for (auto& v : huge.vertices) v *= 1e300;
+    try {
+        voxelize(huge, {});
+        ADD_FAILURE() << "a model of size 1e300 was voxelized";
+    } catch (const InvalidInput& e) {
+        EXPECT_NE(std::string(e.what()).find("where areas overflow"), std::string::npos) << e.what();
+    }
+    for (auto& v : huge.vertices) v *= 1e-160; // 1e140 across: large, but it measures
+    EXPECT_NO_THROW(voxelize(huge, {.resolution = 16}));
 }
 
 TEST(Voxelize, CallbackCancels) {
