@@ -192,6 +192,41 @@ TEST(VdbIO, NonFiniteValuesAreRefusedByBothReaders) {
     EXPECT_THROW(read_vdb_sparse(dir.file("nan.vdb")), InvalidInput);
 }
 
+TEST(VdbIO, TruncatedFilesAreRefusedAtOnce) {
+    // A sphere's .vdb with a second grid and file metadata, cut at every kind of place: in the header, in the
+    // metadata, in a grid's descriptor, in its data, a byte short. Each is refused as truncated; OpenVDB left to
+    // itself read lengths past the end and asked for gigabytes (a 300-byte piece: 37 s, 7 GB).
+    openvdb::initialize();
+    auto sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(1.0f, openvdb::Vec3f(0.0f), 0.1f);
+    sphere->setName("density");
+    auto other = openvdb::FloatGrid::create(0.0f);
+    other->setName("other");
+    other->tree().setValue(openvdb::Coord(1, 2, 3), 0.5f);
+    TempDir dir;
+    {
+        openvdb::io::File file(dir.file("whole.vdb"));
+        openvdb::MetaMap meta;
+        meta.insertMeta("creator", openvdb::StringMetadata("voxwarp io_test"));
+        file.write({sphere, other}, meta);
+    }
+    std::ifstream in(dir.file("whole.vdb"), std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_GT(bytes.size(), 2000u);
+    EXPECT_NO_THROW(read_vdb_sparse(dir.file("whole.vdb"), "other"));
+    for (const std::size_t keep : {std::size_t(8), std::size_t(30), std::size_t(70), std::size_t(120), std::size_t(300), bytes.size() / 2, bytes.size() - 1}) {
+        SCOPED_TRACE(std::to_string(keep) + " of " + std::to_string(bytes.size()) + " bytes");
+        std::ofstream(dir.file("cut.vdb"), std::ios::binary).write(bytes.data(), std::streamsize(keep));
+        for (const char* grid : {"", "other"}) {
+            try {
+                read_vdb_sparse(dir.file("cut.vdb"), grid);
+                ADD_FAILURE() << "a truncated file was read";
+            } catch (const InvalidInput& e) {
+                EXPECT_NE(std::string(e.what()).find("truncated or corrupt .vdb file"), std::string::npos) << e.what();
+            }
+        }
+    }
+}
+
 TEST(VdbIO, RejectsFilesWithoutAFloatGrid) {
     TempDir dir;
     std::ofstream(dir.file("junk.vdb")) << "this is not a vdb file";

@@ -8,6 +8,7 @@
 
 #include <voxwarp/atomic_file.h>
 #include <voxwarp/errors.h>
+#include <voxwarp_internal/messages.h>
 
 #include <tiny_gltf.h>
 
@@ -113,13 +114,8 @@ TriangleMesh read_gltf(const std::string& path, bool binary, std::vector<std::st
     tinygltf::Model model;
     std::string err, warn;
     const bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warn, path) : loader.LoadASCIIFromFile(&model, &err, &warn, path);
-    auto first_line = [](std::string s) {
-        while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
-        const auto nl = s.find('\n');
-        return nl == std::string::npos ? s : s.substr(0, nl);
-    };
-    if (!ok) throw InvalidInput(path + ": cannot parse as glTF" + (err.empty() ? std::string() : ": " + first_line(err)));
-    if (!warn.empty()) warnings.push_back(path + ": " + first_line(warn));
+    if (!ok) throw InvalidInput(path + ": cannot parse as glTF" + (err.empty() ? std::string() : ": " + internal::excerpt(err)));
+    if (!warn.empty()) warnings.push_back(path + ": " + internal::excerpt(warn));
     const fs::path folder = fs::path(path).parent_path();
 
     TriangleMesh mesh;
