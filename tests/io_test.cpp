@@ -15,6 +15,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 namespace voxwarp {
 namespace {
@@ -225,6 +226,36 @@ TEST(VdbIO, TruncatedFilesAreRefusedAtOnce) {
             }
         }
     }
+}
+
+TEST(VdbIO, DamagedVoxelBlocksAreRefusedWhenRead) {
+    // A sphere's .vdb whose voxel values (the leaves' compressed blocks, at the end of the file) are overwritten
+    // here and there. With OpenVDB's delayed loading the damage showed only when later code touched the block: an
+    // OpenVDB RuntimeError out of the middle of the pipeline, reported as an internal error. Now the whole grid is
+    // read at once, and a damaged block is a damaged file.
+    openvdb::initialize();
+    auto sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(1.0f, openvdb::Vec3f(0.0f), 0.1f);
+    sphere->setName("density");
+    TempDir dir;
+    write_grid(sphere, dir.file("whole.vdb"));
+    std::ifstream in(dir.file("whole.vdb"), std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    int refused = 0;
+    for (int k = 1; k <= 8; ++k) {
+        std::string damaged = bytes;
+        const std::size_t at = bytes.size() - std::size_t(k) * bytes.size() / 40; // within the last fifth: voxel blocks
+        for (std::size_t b = 0; b < 16; ++b) damaged[at + b] = char(0xff);
+        std::ofstream(dir.file("damaged.vdb"), std::ios::binary).write(damaged.data(), std::streamsize(damaged.size()));
+        try {
+            const SparseVoxmap v = read_vdb_sparse(dir.file("damaged.vdb"));
+            (void)enclosed_volume(v); // every block read
+        } catch (const InvalidInput&) {
+            ++refused;
+        } catch (const std::exception& e) {
+            ADD_FAILURE() << "bytes " << at << " to " << at + 16 << ": " << e.what();
+        }
+    }
+    EXPECT_GT(refused, 0);
 }
 
 TEST(VdbIO, RejectsFilesWithoutAFloatGrid) {

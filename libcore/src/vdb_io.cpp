@@ -12,6 +12,8 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <new>
+#include <stdexcept>
 
 namespace voxwarp {
 
@@ -108,11 +110,15 @@ openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::stri
     openvdb::GridPtrVecPtr grids;
     try {
         openvdb::io::File file(path);
-        file.open();
+        file.open(/*delayLoad=*/false); // all of it now, so that a damaged block fails here, not when a later step reads it
         grids = file.getGrids();
         file.close();
     } catch (const openvdb::Exception& e) {
         throw InvalidInput(path + ": not a readable .vdb file: " + internal::excerpt(e.what()));
+    } catch (const std::bad_alloc&) { // a length read from damaged bytes
+        throw InvalidInput(path + ": not a readable .vdb file: a size in it is damaged (reading it ran out of memory)");
+    } catch (const std::length_error&) {
+        throw InvalidInput(path + ": not a readable .vdb file: a size in it is damaged");
     } catch (const std::exception& e) {
         throw InvalidInput(path + ": not a readable .vdb file: " + internal::excerpt(e.what()));
     }
