@@ -33,14 +33,14 @@ std::string format_number(double x) {
 
 void validate(const TriangleMesh& mesh, const VoxelizeOptions& options) {
     if (mesh.vertices.empty() || mesh.face_count() == 0) throw InvalidInput("voxelize: the mesh has no faces");
-    for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
-        if (!mesh.vertices[i].allFinite()) throw InvalidInput("voxelize: vertex " + std::to_string(i) + " has a non-finite coordinate");
     // Areas and squared distances square the coordinates: beyond about 1e150 they overflow a double to infinity.
     constexpr double kLargest = 1e150;
-    for (std::size_t i = 0; i < mesh.vertices.size(); ++i)
-        if (mesh.vertices[i].cwiseAbs().maxCoeff() > kLargest)
-            throw InvalidInput("voxelize: vertex " + std::to_string(i) + " has a coordinate of " + format_number(mesh.vertices[i].cwiseAbs().maxCoeff()) +
-                               ", beyond " + format_number(kLargest) + ", where areas overflow: scale the model down");
+    for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
+        if (!mesh.vertices[i].allFinite()) throw InvalidInput("voxelize: vertex " + std::to_string(i) + " has a non-finite coordinate");
+        if (const double largest = mesh.vertices[i].cwiseAbs().maxCoeff(); largest > kLargest)
+            throw InvalidInput("voxelize: vertex " + std::to_string(i) + " has a coordinate of " + format_number(largest) + ", beyond " + format_number(kLargest) +
+                               ", where areas overflow: scale the model down");
+    }
     if (options.voxel_size <= 0 && (options.resolution < 4 || options.resolution > 8192))
         throw InvalidInput("voxelize: resolution " + std::to_string(options.resolution) + " is outside [4, 8192]");
     if (options.voxel_size < 0 || !std::isfinite(options.voxel_size))
