@@ -669,6 +669,29 @@ TEST(Voxelize, WindingNumberAgreesWithFloodFillOnWatertightInput) {
     EXPECT_LE(worst, 0.05);
 }
 
+TEST(Voxelize, AnInsideOutPartIsAsSolidAsTheOthers) {
+    // Two octahedra apart, the second wound inside out (w = -1 in it): both come out solid, whichever way round. The
+    // winding number's sign was flipped for the whole mesh by its total volume, so the inside-out one became a
+    // hollow shell (3 pieces), or, with the two volumes' sum negative, the right one did.
+    TriangleMesh right = test::octahedron_mesh(), wrong = test::inverted(test::octahedron_mesh());
+    for (auto& v : wrong.vertices) v.x() += 3;
+    const double octahedron = 4.0 / 3.0;
+    for (const double scale : {1.0, 1.2}) { // the inside-out one larger too: the total volume negative
+        TriangleMesh w = wrong;
+        for (auto& v : w.vertices) v = Eigen::Vector3d(3, 0, 0) + scale * (v - Eigen::Vector3d(3, 0, 0));
+        const TriangleMesh pair = test::joined(right, w);
+        VoxelizeReport done;
+        const TriangleMesh out = extract(voxelize(pair, {.resolution = 64, .report = &done}));
+        SCOPED_TRACE("scale " + std::to_string(scale));
+        EXPECT_EQ(done.sign, SignMethod::winding_number);
+        EXPECT_EQ(topology(out).components, 2);
+        EXPECT_EQ(topology(out).euler, 4);
+        expect_closed_manifold(out);
+        const double expected = octahedron * (1 + scale * scale * scale);
+        EXPECT_NEAR(enclosed_volume(out), expected, 0.03 * expected);
+    }
+}
+
 TEST(Voxelize, AutoSignGivesUpAFloodFillThatLeaksOrLosesWalls) {
     // A closed box with a box-shaped cavity, its wall 0.36 voxel thick: flood fill finds no voxel centre in the wall
     // and fills the cavity (a solid box); winding numbers keep the wall, two surfaces.

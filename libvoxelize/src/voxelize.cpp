@@ -104,9 +104,9 @@ std::vector<openvdb::Vec3I> vdb_triangles(const TriangleMesh& mesh) {
     return triangles;
 }
 
-/// Narrow-band unsigned distance (world units) whose voxels are then signed, negative inside, by the
+/// Narrow-band unsigned distance (world units) whose voxels are then signed, negative inside (|w| >= 0.5), by the
 /// generalized winding number. Off-band voxels are left at the positive background for sign_off_band().
-openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const WindingNumber& winding, double orientation,
+openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const WindingNumber& winding,
                                             const openvdb::math::Transform& xform, float half_width, Progress& progress) {
     vdb_internal::ProgressInterrupter interrupter{&progress};
     progress.stage("unsigned distance");
@@ -123,7 +123,7 @@ openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const Wind
         for (std::size_t l = r.begin(); l != r.end(); ++l)
             for (auto it = leaves[l]->beginValueOn(); it; ++it) {
                 const auto w = xform.indexToWorld(it.getCoord());
-                if (orientation * winding(Eigen::Vector3d(w[0], w[1], w[2])) >= 0.5) it.setValue(-it.getValue());
+                if (std::abs(winding(Eigen::Vector3d(w[0], w[1], w[2]))) >= 0.5) it.setValue(-it.getValue());
             }
         progress.poll(double(done += r.size()) / double(leaves.size()));
     });
@@ -133,10 +133,10 @@ openvdb::FloatGrid::Ptr winding_number_band(const TriangleMesh& mesh, const Wind
 
 /// Sign the voxels off the narrow band (value >= background). The winding number is harmonic off the
 /// surface, so it is sampled on a coarse lattice (every `spacing` voxels) and a voxel whose eight lattice
-/// corners all lie clearly on one side (|w - 0.5| > 0.25) takes that side; only the others are evaluated
+/// corners all lie clearly on one side (| |w| - 0.5 | > 0.25) takes that side; only the others are evaluated
 /// exactly. A flood fill cannot do this job: on a scan the inside and outside are one region through the holes.
 /// `phi` is the dense signed distance, x fastest.
-void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, double orientation, Progress& progress) {
+void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, Progress& progress) {
     constexpr std::int64_t spacing = 4;
     const std::int64_t nx = phi.dims[0], ny = phi.dims[1], nz = phi.dims[2];
     const std::int64_t cx = (nx - 1) / spacing + 2, cy = (ny - 1) / spacing + 2, cz = (nz - 1) / spacing + 2;
@@ -148,7 +148,7 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
             for (std::int64_t j = 0; j < cy; ++j)
                 for (std::int64_t i = 0; i < cx; ++i)
                     coarse[std::size_t(i + cx * (j + cy * k))] =
-                        float(orientation * winding(phi.world(double(i * spacing), double(j * spacing), double(k * spacing))));
+                        float(std::abs(winding(phi.world(double(i * spacing), double(j * spacing), double(k * spacing)))));
     });
     progress.report(0.5);
     tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const auto& r) {
@@ -171,7 +171,7 @@ void sign_off_band(Voxmap& phi, float background, const WindingNumber& winding, 
                     else if (votes_out == 8)
                         inside = false;
                     else
-                        inside = orientation * winding(phi.world(double(i), double(j), double(k))) >= 0.5;
+                        inside = std::abs(winding(phi.world(double(i), double(j), double(k)))) >= 0.5;
                     value = inside ? -background : background;
                 }
     });
@@ -668,16 +668,17 @@ void voxelize_scan(const TriangleMesh& mesh, const openvdb::math::Transform& xfo
                    Voxmap& voxmap, Progress& progress) {
     const TriangleMesh triangulated = mesh.quads.empty() ? TriangleMesh{} : mesh.triangulated();
     const TriangleMesh& soup = mesh.quads.empty() ? mesh : triangulated;
-    // A mesh whose faces mostly point inwards would read as inside-out; flip the winding number for it.
-    const double orientation = enclosed_volume(soup) < 0 ? -1.0 : 1.0;
-    // Only w >= 0.5 is asked of it, and w is 0 or 1 away from holes: a far-field error up to 0.06 (acceptance
+    // Inside is |w| >= 0.5: a part whose faces point inwards (w = -1 in it) is as solid as one whose faces point
+    // out. Flipping w for a mesh whose volume is negative, as before, turned the other parts of a mixed model into
+    // thin shells (an inside-out tetrahedron beside a right one came out hollow, 3 pieces).
+    // Only |w| >= 0.5 is asked of it, and w is 0 or 1 away from holes: a far-field error up to 0.06 (acceptance
     // 2, against 0.02 at the default 3) moves only a few voxels of a hole's cap on the bundled scan, and
     // voxelizes it 1.6x faster.
     const WindingNumber winding(soup, 2.0);
-    const auto band = winding_number_band(soup, winding, orientation, xform, half_width, progress);
+    const auto band = winding_number_band(soup, winding, xform, half_width, progress);
     voxmap.density.resize(std::size_t(voxmap.voxel_count())); // uninitialised: grid_to_dense writes every voxel
     grid_to_dense(*band, voxmap, [](float phi) { return phi; });
-    sign_off_band(voxmap, band->background(), winding, orientation, progress);
+    sign_off_band(voxmap, band->background(), winding, progress);
     keep_thin_walls(voxmap, winding, progress);
     drop_specks(voxmap, progress);
     fit_crossings(voxmap, winding, options.ramp_voxels, progress);
