@@ -30,7 +30,7 @@ namespace voxwarp {
 enum class SignMethod {
     automatic,      ///< flood_fill for watertight oriented meshes whose flood fill holds, winding_number otherwise
     flood_fill,     ///< OpenVDB meshToLevelSet: fast, exact for watertight input, leaks through holes
-    winding_number, ///< generalized winding number >= 0.5: robust to holes and non-manifold spots
+    winding_number, ///< generalized winding number, inside where |w| >= 0.5: robust to holes, non-manifold spots and parts wound inside out
 };
 
 /// What voxelize did, for reports.
