@@ -57,8 +57,9 @@ void finish(const Global& global, const DeformArgs& a, DeformReport& r, Clock::t
     for (const auto& w : deform_warnings(r)) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
     r.seconds_total = seconds_since(start);
     char line[256];
-    std::snprintf(line, sizeof line, "volume %.6g -> %.6g (%+.2f%%), %zu edit(s), %.2f s", r.volume_before, r.volume_after,
-                  r.volume_before != 0 ? 100.0 * (r.volume_after / r.volume_before - 1.0) : 0.0, r.edits.size(), r.seconds_total);
+    char change[48] = "no input volume to compare"; // parts wound inside out can cancel the input's own
+    if (r.volume_before > 0) std::snprintf(change, sizeof change, "%+.2f%%", 100.0 * (r.volume_after / r.volume_before - 1.0));
+    std::snprintf(line, sizeof line, "volume %.6g -> %.6g (%s), %zu edit(s), %.2f s", r.volume_before, r.volume_after, change, r.edits.size(), r.seconds_total);
     note(global, line);
     if (!a.report.empty()) {
         const auto text = report_json(r, {{"input", a.input}, {"edits_file", a.edits}, {"output", a.output}});

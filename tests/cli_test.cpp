@@ -272,6 +272,22 @@ TEST_F(Cli, RemeshCarriesTheTextureAndItsLibrary) {
     EXPECT_FALSE(fs::exists(file("out/bad.obj")));
 }
 
+TEST_F(Cli, AnInputWithNoVolumeOfItsOwnHasNoVolumeChange) {
+    // Two octahedra, one wound inside out: their volumes cancel, and the remesh (two solids) has nothing to be a
+    // percentage of. It read "volume 0 -> 2.67 (+0.00%)".
+    TriangleMesh wrong = test::inverted(test::octahedron_mesh());
+    for (auto& v : wrong.vertices) v.x() += 3;
+    write_mesh(test::joined(test::octahedron_mesh(), wrong), file("pair.obj"));
+    const Outcome r = run("remesh " + file("pair.obj") + " -r 48 -o " + file("out.obj") + " --report " + file("report.json"));
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("(no input volume to compare)"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("+0.00%"), std::string::npos) << r.err;
+    std::ifstream in(file("report.json"));
+    const nlohmann::json j = nlohmann::json::parse(in);
+    EXPECT_TRUE(j["volume_change_percent"].is_null()) << j["volume_change_percent"];
+    EXPECT_NEAR(j["volume_after"].get<double>(), 8.0 / 3.0, 0.03 * 8.0 / 3.0);
+}
+
 TEST_F(Cli, CompareReportsJson) {
     // The bunny against itself moved by 0.05 along x (a hundredth of its size): every point of either lies within
     // 0.05 of the other, and the facts of both are the bunny's.

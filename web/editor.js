@@ -266,7 +266,8 @@
   function showReport(report, resolution, ms) {
     status.className = '';
     status.textContent = 'resolution ' + resolution + ', ' + report.output_faces + ' faces, ' + Math.round(ms) + ' ms\n' +
-      'volume ' + (report.volume_change_percent >= 0 ? '+' : '') + report.volume_change_percent.toFixed(2) + ' %' +
+      (report.volume_change_percent === null ? 'volume: no input volume to compare' // parts wound inside out cancel it
+        : 'volume ' + (report.volume_change_percent >= 0 ? '+' : '') + report.volume_change_percent.toFixed(2) + ' %') +
       (state.current.solverTurned && state.current.solver === 'rigid' ? '\nsolver rigid: a handle turns (min-norm would shear it)' : '');
     (report.thin_parts || []).forEach(function (p) { // what the voxmap lost (README, "Reports")
       status.className = 'warning';

@@ -12,7 +12,9 @@ namespace voxwarp {
 
 namespace {
 
-double change_percent(double before, double after) { return before != 0 ? 100.0 * (after / before - 1.0) : 0.0; }
+/// The change in percent; null where there was no volume to compare with (an input whose parts wound inside out
+/// cancel its own, or an empty voxmap), which read as "+0.00 %".
+nlohmann::json change_percent(double before, double after) { return before > 0 ? nlohmann::json(100.0 * (after / before - 1.0)) : nlohmann::json(nullptr); }
 
 /// A distance for JSON: null when unmeasured (< 0) or beyond the measured reach (infinite).
 nlohmann::json distance(double d) { return d >= 0 && std::isfinite(d) ? nlohmann::json(d) : nlohmann::json(nullptr); }
