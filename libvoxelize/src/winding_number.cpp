@@ -30,12 +30,18 @@ struct WindingNumber::Tree {
         Eigen::Vector3d lo = Eigen::Vector3d::Zero(), hi = Eigen::Vector3d::Zero(); // the triangles' bounding box
     };
     static constexpr std::int32_t kLeafSize = 8;
-    std::vector<Eigen::Vector3d> a, b, c; // triangle corners, in `order`
-    std::vector<double> corners;          // the same, as nine arrays: a's x, y, z, then b's, then c's
+    std::size_t triangles = 0;
+    std::vector<double> corners; // the triangles' corners, in `order`, as nine arrays: the first corners' x, y, z, then the second's, the third's
     std::vector<Node> nodes;
     std::vector<Far> far;       // per node
     std::vector<Bounds> boxes;  // per node
     double beta = 3.0;
+
+    /// Corner k (0, 1, 2) of triangle i.
+    Eigen::Vector3d corner(std::size_t i, int k) const {
+        const double* x = corners.data() + 3 * std::size_t(k) * triangles + i;
+        return {x[0], x[triangles], x[2 * triangles]};
+    }
 
     static double solid_angle(const Eigen::Vector3d& A, const Eigen::Vector3d& B, const Eigen::Vector3d& C) {
         // Van Oosterom & Strackee (1983): tan(Omega / 2) = det[A B C] / (|A||B||C| + (A.B)|C| + (B.C)|A| + (C.A)|B|)
@@ -151,18 +157,11 @@ WindingNumber::WindingNumber(const TriangleMesh& mesh, double beta) : tree_(std:
         jobs.push_back({left, job.first, half});
         jobs.push_back({left + 1, job.first + half, job.count - half});
     }
-    t.a.resize(n), t.b.resize(n), t.c.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-        const auto& tri = mesh.triangles[order[i]];
-        t.a[i] = mesh.vertices[tri[0]], t.b[i] = mesh.vertices[tri[1]], t.c[i] = mesh.vertices[tri[2]];
-    }
+    t.triangles = n;
     t.corners.resize(9 * n);
     for (std::size_t i = 0; i < n; ++i)
-        for (int k = 0; k < 3; ++k) {
-            t.corners[std::size_t(k) * n + i] = t.a[i][k];
-            t.corners[std::size_t(3 + k) * n + i] = t.b[i][k];
-            t.corners[std::size_t(6 + k) * n + i] = t.c[i][k];
-        }
+        for (std::size_t k = 0; k < 3; ++k)
+            for (std::size_t axis = 0; axis < 3; ++axis) t.corners[(3 * k + axis) * n + i] = mesh.vertices[std::size_t(mesh.triangles[std::size_t(order[i])][k])][int(axis)];
 }
 
 WindingNumber::~WindingNumber() = default;
@@ -171,7 +170,7 @@ WindingNumber& WindingNumber::operator=(WindingNumber&&) noexcept = default;
 
 double WindingNumber::operator()(const Eigen::Vector3d& q) const {
     const auto& t = *tree_;
-    if (t.nodes.empty() || t.a.empty()) return 0.0;
+    if (t.nodes.empty() || t.triangles == 0) return 0.0;
     double omega = 0;
     Tree::AngleSum near;
     std::int32_t stack[128];
@@ -191,25 +190,24 @@ double WindingNumber::operator()(const Eigen::Vector3d& q) const {
                                f.m[5] * d[1] * d[2];
             omega += (f.area_normal.dot(d) - f.trace) * inv3 + 3.0 * dMd * inv5;
         } else if (node.left < 0 || top + 2 > 128) {
-            // solid_angle's two terms for the leaf's triangles, from their corners kept coordinate by coordinate
-            // (a loop the compiler runs two triangles at a time), then multiplied in.
-            double det[Tree::kLeafSize], den[Tree::kLeafSize];
-            const std::int32_t f = node.first, n = std::min(node.count, Tree::kLeafSize);
+            // solid_angle's two terms for the leaf's triangles (a node bigger than a leaf where the stack ran out: a
+            // leaf's worth at a time), from their corners kept coordinate by coordinate (a loop the compiler runs two
+            // triangles at a time), then multiplied in.
             const double* x = t.corners.data();
-            const std::size_t m = t.a.size();
-            for (std::int32_t k = 0; k < n; ++k) {
-                const std::size_t i = std::size_t(f + k);
-                const double ax = x[i] - q[0], ay = x[m + i] - q[1], az = x[2 * m + i] - q[2];
-                const double bx = x[3 * m + i] - q[0], by = x[4 * m + i] - q[1], bz = x[5 * m + i] - q[2];
-                const double cx = x[6 * m + i] - q[0], cy = x[7 * m + i] - q[1], cz = x[8 * m + i] - q[2];
-                const double la = std::sqrt(ax * ax + ay * ay + az * az), lb = std::sqrt(bx * bx + by * by + bz * bz), lc = std::sqrt(cx * cx + cy * cy + cz * cz);
-                det[k] = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
-                den[k] = la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (bx * cx + by * cy + bz * cz) * la + (cx * ax + cy * ay + cz * az) * lb;
-            }
-            for (std::int32_t k = 0; k < n; ++k) near.add(det[k], den[k]);
-            for (std::int32_t i = f + n; i < f + node.count; ++i) { // only where the stack ran out: a node bigger than a leaf
-                const Eigen::Vector3d A = t.a[std::size_t(i)] - q, B = t.b[std::size_t(i)] - q, C = t.c[std::size_t(i)] - q;
-                near.add(A.dot(B.cross(C)), A.norm() * B.norm() * C.norm() + A.dot(B) * C.norm() + B.dot(C) * A.norm() + C.dot(A) * B.norm());
+            const std::size_t m = t.triangles;
+            for (std::int32_t first = node.first; first < node.first + node.count; first += Tree::kLeafSize) {
+                double det[Tree::kLeafSize], den[Tree::kLeafSize];
+                const std::int32_t n = std::min(node.first + node.count - first, Tree::kLeafSize);
+                for (std::int32_t k = 0; k < n; ++k) {
+                    const std::size_t i = std::size_t(first + k);
+                    const double ax = x[i] - q[0], ay = x[m + i] - q[1], az = x[2 * m + i] - q[2];
+                    const double bx = x[3 * m + i] - q[0], by = x[4 * m + i] - q[1], bz = x[5 * m + i] - q[2];
+                    const double cx = x[6 * m + i] - q[0], cy = x[7 * m + i] - q[1], cz = x[8 * m + i] - q[2];
+                    const double la = std::sqrt(ax * ax + ay * ay + az * az), lb = std::sqrt(bx * bx + by * by + bz * bz), lc = std::sqrt(cx * cx + cy * cy + cz * cz);
+                    det[k] = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
+                    den[k] = la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (bx * cx + by * cy + bz * cz) * la + (cx * ax + cy * ay + cz * az) * lb;
+                }
+                for (std::int32_t k = 0; k < n; ++k) near.add(det[k], den[k]);
             }
         } else {
             stack[top++] = node.left;
@@ -222,14 +220,14 @@ double WindingNumber::operator()(const Eigen::Vector3d& q) const {
 double WindingNumber::exact(const Eigen::Vector3d& q) const {
     const auto& t = *tree_;
     double omega = 0;
-    for (std::size_t i = 0; i < t.a.size(); ++i) omega += Tree::solid_angle(t.a[i] - q, t.b[i] - q, t.c[i] - q);
+    for (std::size_t i = 0; i < t.triangles; ++i) omega += Tree::solid_angle(t.corner(i, 0) - q, t.corner(i, 1) - q, t.corner(i, 2) - q);
     return omega / (4.0 * std::numbers::pi);
 }
 
 WindingNumber::Crossings WindingNumber::crossings(const Eigen::Vector3d& p, const Eigen::Vector3d& q) const {
     const auto& tree = *tree_;
     Crossings result;
-    if (tree.nodes.empty() || tree.a.empty()) return result;
+    if (tree.nodes.empty() || tree.triangles == 0) return result;
     const Eigen::Vector3d d = q - p;
     result.first = 2.0;
     std::int32_t stack[128];
@@ -254,7 +252,7 @@ WindingNumber::Crossings WindingNumber::crossings(const Eigen::Vector3d& p, cons
         if (enter > leave) continue;
         if (node.left < 0 || top + 2 > 128) {
             for (std::int32_t i = node.first; i < node.first + node.count; ++i) {
-                const double u = internal::line_meets_triangle(p, d, tree.a[i], tree.b[i], tree.c[i]); // p + u d
+                const double u = internal::line_meets_triangle(p, d, tree.corner(std::size_t(i), 0), tree.corner(std::size_t(i), 1), tree.corner(std::size_t(i), 2)); // p + u d
                 if (!(u >= 0 && u <= 1)) continue;
                 ++result.count;
                 result.first = std::min(result.first, u);
