@@ -57,8 +57,8 @@ void finish(const Global& global, const DeformArgs& a, DeformReport& r, Clock::t
     for (const auto& w : deform_warnings(r)) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
     r.seconds_total = seconds_since(start);
     char line[256];
-    char change[48] = "no input volume to compare"; // parts wound inside out can cancel the input's own
-    if (r.volume_before > 0) std::snprintf(change, sizeof change, "%+.2f%%", 100.0 * (r.volume_after / r.volume_before - 1.0));
+    char change[48] = "no input volume to compare";
+    if (const auto percent = volume_change_percent(r.volume_before, r.volume_after)) std::snprintf(change, sizeof change, "%+.2f%%", *percent);
     std::snprintf(line, sizeof line, "volume %.6g -> %.6g (%s), %zu edit(s), %.2f s", r.volume_before, r.volume_after, change, r.edits.size(), r.seconds_total);
     note(global, line);
     if (!a.report.empty()) {

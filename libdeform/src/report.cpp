@@ -12,9 +12,11 @@ namespace voxwarp {
 
 namespace {
 
-/// The change in percent; null where there was no volume to compare with (an input whose parts wound inside out
-/// cancel its own, or an empty voxmap), which read as "+0.00 %".
-nlohmann::json change_percent(double before, double after) { return before > 0 ? nlohmann::json(100.0 * (after / before - 1.0)) : nlohmann::json(nullptr); }
+/// volume_change_percent, null where there is none (it read as "+0.00 %").
+nlohmann::json change_percent(double before, double after) {
+    const auto percent = volume_change_percent(before, after);
+    return percent ? nlohmann::json(*percent) : nlohmann::json(nullptr);
+}
 
 /// A distance for JSON: null when unmeasured (< 0) or beyond the measured reach (infinite).
 nlohmann::json distance(double d) { return d >= 0 && std::isfinite(d) ? nlohmann::json(d) : nlohmann::json(nullptr); }
@@ -26,6 +28,11 @@ std::string method(const EditReport& e) {
 }
 
 } // namespace
+
+std::optional<double> volume_change_percent(double before, double after) {
+    if (!(before > 0)) return std::nullopt;
+    return 100.0 * (after / before - 1.0);
+}
 
 std::string report_json(const DeformReport& r, const std::map<std::string, std::string>& fields) {
     nlohmann::json j;

@@ -12,6 +12,7 @@
 
 #include <array>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -130,6 +131,10 @@ TriangleMesh deform_vertices(const TriangleMesh& mesh, const EditScript& script,
 /// winding numbers, constraints that miss their targets by more than half a voxel (with the cause where known), maps
 /// that still fold, thin parts lost.
 std::vector<std::string> deform_warnings(const DeformReport& report);
+
+/// Volume after against before, in percent; none where there is no volume before to compare with (an input whose
+/// parts, wound inside out, cancel its own volume).
+std::optional<double> volume_change_percent(double before, double after);
 
 /// The report as the JSON text `voxwarp deform --report` writes (schema in README.md, "Reports"). `fields` are
 /// added at the top level as strings (the CLI adds "input", "edits_file", "output").
