@@ -113,8 +113,6 @@ openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::stri
         file.open(/*delayLoad=*/false); // all of it now, so that a damaged block fails here, not when a later step reads it
         grids = file.getGrids();
         file.close();
-    } catch (const openvdb::Exception& e) {
-        throw InvalidInput(path + ": not a readable .vdb file: " + internal::excerpt(e.what()));
     } catch (const std::bad_alloc&) { // a length read from damaged bytes
         throw InvalidInput(path + ": not a readable .vdb file: a size in it is damaged (reading it ran out of memory)");
     } catch (const std::length_error&) {
