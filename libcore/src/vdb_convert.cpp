@@ -6,11 +6,12 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
-#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 namespace voxwarp::vdb_internal {
 
@@ -91,6 +92,33 @@ struct GridFrame {
     bool level_set = false;
 };
 
+/// Whether every value the grid holds (leaf voxels, tiles, background) is finite.
+bool finite_values(const openvdb::FloatGrid& grid) {
+    const auto& tree = grid.tree();
+    if (!std::isfinite(tree.background())) return false;
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    leaves.reserve(tree.leafCount());
+    tree.getNodes(leaves);
+    const bool leaves_finite = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, leaves.size(), 256), true,
+        [&](const auto& r, bool ok) {
+            for (std::size_t i = r.begin(); ok && i != r.end(); ++i) {
+                const float* v = leaves[i]->buffer().data();
+                bool all = true;
+                for (int k = 0; k < 512; ++k) all &= std::isfinite(v[k]);
+                ok = all;
+            }
+            return ok;
+        },
+        [](bool a, bool b) { return a && b; });
+    if (!leaves_finite) return false;
+    auto tiles = tree.cbeginValueAll();
+    tiles.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);
+    for (; tiles; ++tiles)
+        if (!std::isfinite(*tiles)) return false;
+    return true;
+}
+
 GridFrame grid_frame(const openvdb::FloatGrid& grid, const std::string& source) {
     const auto& xform = grid.transform();
     if (!xform.isLinear() || !xform.hasUniformScale())
@@ -107,6 +135,8 @@ GridFrame grid_frame(const openvdb::FloatGrid& grid, const std::string& source) 
                 throw InvalidInput(source + ": grid '" + grid.getName() + "' is rotated or sheared; voxmaps need axis-aligned voxels");
     }
     if (!(h > 0) || !std::isfinite(h)) throw InvalidInput(source + ": grid '" + grid.getName() + "' has voxel size " + std::to_string(h));
+    // Before the bounding box: a damaged file's NaN tile can lie far off, and the voxmap would cover the way there.
+    if (!finite_values(grid)) throw InvalidInput(source + ": grid '" + grid.getName() + "' holds non-finite values (NaN or infinity)");
 
     GridFrame frame{h, grid.evalActiveVoxelBoundingBox(), grid.getGridClass() == openvdb::GRID_LEVEL_SET};
     if (frame.box.empty()) throw InvalidInput(source + ": grid '" + grid.getName() + "' has no active voxels");
@@ -119,18 +149,10 @@ GridFrame grid_frame(const openvdb::FloatGrid& grid, const std::string& source) 
 }
 
 /// Grid value -> density: a level set's signed distance through a one-voxel ramp, anything else clamped to [0, 1].
-/// Sets `non_finite` (and returns 0) for NaN or infinity.
-inline float to_density(float v, const GridFrame& frame, std::atomic<bool>& non_finite) {
-    if (!std::isfinite(v)) {
-        non_finite.store(true, std::memory_order_relaxed);
-        return 0.0f;
-    }
+/// (grid_frame has refused grids holding NaN or infinity.)
+inline float to_density(float v, const GridFrame& frame) {
     if (frame.level_set) v = 0.5f - 0.5f * v / float(frame.h);
     return v < 0 ? 0.0f : (v > 1 ? 1.0f : v);
-}
-
-[[noreturn]] void throw_non_finite(const openvdb::FloatGrid& grid, const std::string& source) {
-    throw InvalidInput(source + ": grid '" + grid.getName() + "' holds non-finite values (NaN or infinity)");
 }
 
 } // namespace
@@ -147,11 +169,9 @@ Voxmap from_float_grid(const openvdb::FloatGrid& grid, const std::string& source
     DenseT dense(box, voxmap.density.data());
     openvdb::tools::copyToDense(grid, dense);
 
-    std::atomic<bool> non_finite{false};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, voxmap.density.size(), 1 << 16), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = to_density(voxmap.density[i], frame, non_finite);
+        for (std::size_t i = r.begin(); i != r.end(); ++i) voxmap.density[i] = to_density(voxmap.density[i], frame);
     });
-    if (non_finite) throw_non_finite(grid, source);
     return voxmap;
 }
 
@@ -164,11 +184,15 @@ SparseVoxmap sparse_from_float_grid(const openvdb::FloatGrid& grid, const std::s
     for (int a = 0; a < 3; ++a) lo[a] &= ~(B - 1);
     frame.box = openvdb::CoordBBox(lo, frame.box.max());
     const std::array<std::int64_t, 3> dims{frame.box.dim()[0], frame.box.dim()[1], frame.box.dim()[2]};
+    // A value and a pointer for every block of the box, 2 KiB for each leaf: voxels far apart (a grid of two voxels
+    // 5000 apart took 3.9 GB) are refused with the estimate.
+    long double bytes = (long double)grid.tree().leafCount() * SparseVoxmap::kBlockVoxels * sizeof(float);
+    bytes += (long double)((dims[0] + B - 1) / B) * (long double)((dims[1] + B - 1) / B) * (long double)((dims[2] + B - 1) / B) * (sizeof(float) + sizeof(void*));
+    require_memory(bytes >= 1.8e19L ? std::numeric_limits<std::uint64_t>::max() : std::uint64_t(bytes), 0,
+                   source + ": a voxmap of " + std::to_string(dims[0]) + "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]));
     const auto origin = grid.transform().indexToWorld(lo);
     SparseVoxmap voxmap(dims, Eigen::Vector3d(origin[0], origin[1], origin[2]), frame.h);
-    std::atomic<bool> non_finite{false};
-    grid_to_blocks(grid, lo, voxmap, [&](float v) { return to_density(v, frame, non_finite); });
-    if (non_finite) throw_non_finite(grid, source);
+    grid_to_blocks(grid, lo, voxmap, [&](float v) { return to_density(v, frame); });
     return voxmap;
 }
 

@@ -1,6 +1,8 @@
 #include <voxwarp/errors.h>
 #include <voxwarp/voxmap.h>
 
+#include <limits>
+
 #include "trilinear.h"
 
 #include <tbb/blocked_range.h>
@@ -73,7 +75,9 @@ double enclosed_volume(const Voxmap& voxmap) {
 }
 
 std::uint64_t voxmap_bytes(const std::array<std::int64_t, 3>& dims) {
-    return std::uint64_t(dims[0]) * std::uint64_t(dims[1]) * std::uint64_t(dims[2]) * sizeof(float);
+    // Saturating: a damaged file's grid can span 2^31 voxels a side, whose cube overflows 64 bits.
+    const long double bytes = (long double)dims[0] * (long double)dims[1] * (long double)dims[2] * sizeof(float);
+    return bytes >= 1.8e19L ? std::numeric_limits<std::uint64_t>::max() : std::uint64_t(bytes);
 }
 
 } // namespace voxwarp

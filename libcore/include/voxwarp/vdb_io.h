@@ -19,10 +19,12 @@ namespace voxwarp {
 void write_vdb(const Voxmap& voxmap, const std::string& path);
 void write_vdb(const SparseVoxmap& voxmap, const std::string& path);
 
-/// Read the first float grid of a .vdb file (or the grid named `grid_name` when given) as a voxmap
-/// covering the grid's active bounding box (plus the stored dims when written by voxwarp).
-/// @throw IOError when the file cannot be opened; InvalidInput when it holds no float grid, the grid is
-///        empty, its transform is not a uniform scale + translation, or it holds non-finite values.
+/// Read the first float grid of a .vdb file in the file's order (or the first named `grid_name` when given) as a
+/// voxmap covering the grid's active bounding box (plus the stored dims when written by voxwarp). Only that grid is
+/// read, after its bytes are checked as far as OpenVDB's reader trusts them.
+/// @throw IOError when the file cannot be opened; InvalidInput when it is truncated or damaged, holds no float grid,
+///        the grid is empty, its transform is not a uniform scale + translation, or it holds non-finite values;
+///        ResourceLimit when the voxmap would outgrow the memory available.
 Voxmap read_vdb(const std::string& path, const std::string& grid_name = {});
 
 /// The same grid, block-sparse (memory along the surface only). Its origin is moved down to a multiple of 8 of
