@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <sstream>
 
 namespace voxwarp {
 namespace {
@@ -78,6 +79,37 @@ TEST(MeshIO, BadFilesNameTheProblem) {
         EXPECT_NE(std::string(e.what()).find("badindex.obj"), std::string::npos) << e.what();
     }
     EXPECT_THROW(read_mesh(write("mesh.xyz", "1 2 3\n")), InvalidInput);
+}
+
+TEST(MeshIO, RepeatedFacesAreReadOnceWithAWarning) {
+    // A unit cube (12 triangles, group "cube", a texture coordinate per corner) followed by three of its faces again:
+    // as written, reversed and rotated (group "again"). Counted twice, a face doubled its share of the volume (1.33
+    // for 1) and of the winding number, and made the cube's edges non-manifold.
+    const TriangleMesh cube = test::box_mesh({0, 0, 0}, {1, 1, 1}, 1);
+    ASSERT_EQ(cube.triangles.size(), 12u);
+    std::ostringstream obj;
+    for (const auto& v : cube.vertices) obj << "v " << v.x() << " " << v.y() << " " << v.z() << "\n";
+    obj << "vt 0.25 0.75\ng cube\n";
+    auto face = [&](int a, int b, int c) { obj << "f " << a + 1 << "/1 " << b + 1 << "/1 " << c + 1 << "/1\n"; };
+    for (const auto& t : cube.triangles) face(t[0], t[1], t[2]);
+    obj << "g again\n";
+    face(cube.triangles[0][0], cube.triangles[0][1], cube.triangles[0][2]);
+    face(cube.triangles[4][2], cube.triangles[4][1], cube.triangles[4][0]);
+    face(cube.triangles[9][1], cube.triangles[9][2], cube.triangles[9][0]);
+    TempDir dir;
+    std::ofstream(dir.file("cube.obj")) << obj.str();
+    std::vector<std::string> warnings;
+    const TriangleMesh back = read_mesh(dir.file("cube.obj"), &warnings);
+    ASSERT_EQ(back.triangles.size(), 12u);
+    EXPECT_EQ(back.triangles, cube.triangles); // the first of each kept, in the file's order
+    ASSERT_EQ(back.triangle_groups.size(), 12u);
+    for (const std::int32_t g : back.triangle_groups) EXPECT_EQ(back.groups.at(std::size_t(g)), "cube");
+    EXPECT_EQ(back.triangle_uvs.size(), 12u);
+    EXPECT_TRUE(topology(back).watertight());
+    EXPECT_NEAR(enclosed_volume(back), 1.0, 1e-12);
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("cube.obj: 3 triangles repeat the corners of an earlier one"), std::string::npos) << warnings[0];
+    EXPECT_EQ(read_mesh(dir.file("cube.obj")).triangles.size(), 12u); // the same without a warnings list
 }
 
 // Every input the fuzzers once choked on (tests/fuzz/regressions/mesh; first byte picks the format as in

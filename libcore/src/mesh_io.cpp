@@ -148,7 +148,55 @@ bool is_mesh_path(const std::string& path) {
     return ext == ".obj" || ext == ".off" || ext == ".ply" || ext == ".stl" || ext == ".om" || ext == ".gltf" || ext == ".glb";
 }
 
+namespace {
+
+/// Drops each triangle whose three vertices (in any order or orientation) an earlier triangle already has, with its
+/// attributes; returns how many. Counted twice, a face doubles its share of the enclosed volume and of the winding
+/// number (a unit cube with one face repeated read 1.33).
+std::size_t drop_repeated_triangles(TriangleMesh& mesh) {
+    using Key = std::array<std::int32_t, 3>;
+    std::vector<std::pair<Key, std::uint32_t>> keys(mesh.triangles.size());
+    for (std::size_t t = 0; t < keys.size(); ++t) {
+        Key k = mesh.triangles[t];
+        std::sort(k.begin(), k.end());
+        keys[t] = {k, std::uint32_t(t)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<char> keep(mesh.triangles.size(), 1);
+    std::size_t dropped = 0;
+    for (std::size_t i = 1; i < keys.size(); ++i)
+        if (keys[i].first == keys[i - 1].first) keep[keys[i].second] = 0, ++dropped; // the sort leaves the first one first
+    if (dropped == 0) return 0;
+    auto compact = [&](auto& per_triangle) {
+        if (per_triangle.empty()) return;
+        std::size_t out = 0;
+        for (std::size_t t = 0; t < keep.size(); ++t)
+            if (keep[t]) per_triangle[out++] = per_triangle[t];
+        per_triangle.resize(out);
+    };
+    compact(mesh.triangle_uvs);
+    compact(mesh.triangle_normals);
+    compact(mesh.triangle_materials);
+    compact(mesh.triangle_groups);
+    compact(mesh.triangles);
+    return dropped;
+}
+
+TriangleMesh read_mesh_as_written(const std::string& path, std::vector<std::string>* warnings);
+
+} // namespace
+
 TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnings) {
+    TriangleMesh mesh = read_mesh_as_written(path, warnings);
+    if (const std::size_t dropped = drop_repeated_triangles(mesh); dropped > 0 && warnings)
+        warnings->push_back(path + ": " + std::to_string(dropped) + (dropped == 1 ? " triangle repeats" : " triangles repeat") +
+                            " the corners of an earlier one; each is read once");
+    return mesh;
+}
+
+namespace {
+
+TriangleMesh read_mesh_as_written(const std::string& path, std::vector<std::string>* warnings) {
     static QuietOpenMesh quiet;
     namespace fs = std::filesystem;
     std::error_code ec;
@@ -208,6 +256,8 @@ TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnin
     check_attributes(mesh, path); // the normals
     return std::move(mesh);
 }
+
+} // namespace
 
 void write_mesh(const TriangleMesh& mesh, const std::string& path) {
     static QuietOpenMesh quiet;

@@ -12,11 +12,13 @@
 namespace voxwarp {
 
 /// Read a mesh file as a plain polygon list (polygons fan-triangulated), keeping every face even at
-/// non-manifold edges and vertices (OpenMesh's halfedge mesh would drop those).
+/// non-manifold edges and vertices (OpenMesh's halfedge mesh would drop those), but once: a triangle with the
+/// corners of an earlier one (in any order) is dropped, with a warning.
 /// Positions are world units as stored in the file.
 /// @throw IOError when the file cannot be opened; InvalidInput when it is empty, unparsable, has
 ///        non-finite coordinates, or faces that index outside the vertex list.
-/// Problems that do not stop the reading (an OBJ's missing .mtl or texture) are appended to `warnings` when given.
+/// Problems that do not stop the reading (an OBJ's missing .mtl or texture, repeated faces) are appended to
+/// `warnings` when given.
 TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnings = nullptr);
 
 /// Write a mesh (format by extension: .obj .off .ply .stl .om). Written to a temporary file beside
