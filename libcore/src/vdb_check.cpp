@@ -32,7 +32,9 @@ constexpr char kSeparator = '\x1e';
 class Cursor {
 public:
     Cursor(const std::string& path, std::uint64_t at, std::uint64_t end, std::string context)
-        : in_(path, std::ios::binary), path_(path), at_(at), end_(end), context_(std::move(context)) {
+        : buffer_(std::size_t(1) << 16), path_(path), at_(at), end_(end), context_(std::move(context)) {
+        in_.rdbuf()->pubsetbuf(buffer_.data(), std::streamsize(buffer_.size())); // most skips then stay in the buffer
+        in_.open(path, std::ios::binary);
         in_.seekg(std::streamoff(at));
     }
     std::uint64_t at() const { return at_; }
@@ -55,7 +57,8 @@ public:
     }
     void skip(std::uint64_t bytes, const char* what) {
         if (bytes > left()) fail(std::string(what) + " (" + std::to_string(bytes) + " bytes) runs past the end");
-        in_.seekg(std::streamoff(bytes), std::ios::cur);
+        if (bytes <= buffer_.size()) in_.ignore(std::streamsize(bytes)); // through the buffer: a seek is a system call
+        else in_.seekg(std::streamoff(bytes), std::ios::cur);
         at_ += bytes;
     }
     /// A length-prefixed string, at most `limit` bytes kept (the rest skipped).
@@ -69,6 +72,7 @@ public:
     }
 
 private:
+    std::vector<char> buffer_;
     std::ifstream in_;
     std::string path_;
     std::uint64_t at_, end_;
@@ -114,7 +118,7 @@ public:
     /// False where the map type is not one OpenVDB knows: it refuses the grid there, before its tree.
     bool transform() { return map(c_.string("the transform's type"), 0); }
 
-    void tree() {
+    TreeNodeCounts tree() {
         c_.skip(4, "the tree's buffer count");
         c_.skip(4, "the background value");
         const auto tiles = c_.get<std::uint32_t>("the root's tile count");
@@ -138,6 +142,7 @@ public:
                 c_.skip(mask_bytes(3), "a leaf's value mask"); // io::File's stream is seekable: the topology's mask is used
                 values(512, active);
             }
+        return counts_; // the nodes the reader allocates (overwritten duplicates included: they leak, not vanish)
     }
 
 private:
@@ -153,6 +158,7 @@ private:
 
     /// An internal node (log2 side 5 or 4) and everything below it; each leaf's active count appended to `leaves`.
     void node(int log2, std::vector<std::uint16_t>& leaves) {
+        ++(log2 == 5 ? counts_.upper : counts_.lower);
         std::vector<std::uint64_t> child_mask, value_mask;
         mask(log2, child_mask, "an internal node's child mask");
         const std::uint32_t active = mask(log2, value_mask, "an internal node's value mask");
@@ -164,6 +170,7 @@ private:
                 } else {
                     std::vector<std::uint64_t> leaf_mask;
                     leaves.push_back(std::uint16_t(mask(3, leaf_mask, "a leaf's value mask")));
+                    ++counts_.leaves;
                 }
             }
     }
@@ -244,6 +251,7 @@ private:
     Cursor& c_;
     std::uint32_t compression_;
     bool half_ = false;
+    TreeNodeCounts counts_;
 };
 
 } // namespace
@@ -296,14 +304,14 @@ VdbLayout read_vdb_layout(const std::string& path, std::uint64_t size) {
     return layout;
 }
 
-void check_float_grid(const std::string& path, const VdbLayout& layout, const VdbGridEntry& grid) {
-    if (!layout.walkable) return;
+TreeNodeCounts check_float_grid(const std::string& path, const VdbLayout& layout, const VdbGridEntry& grid) {
+    if (!layout.walkable) return {};
     Cursor c(path, std::uint64_t(grid.start), std::uint64_t(grid.end), "grid '" + internal::excerpt(base_name(grid.unique_name), 60) + "': ");
     FloatGridWalk walk(c, c.get<std::uint32_t>("the grid's compression flags"));
     walk.metadata();
-    if (!walk.transform()) return; // OpenVDB refuses a map type it does not know, before the tree
-    if (!grid.instance_parent.empty()) return; // its tree is its parent's, walked on its own
-    walk.tree();
+    if (!walk.transform()) return {}; // OpenVDB refuses a map type it does not know, before the tree
+    if (!grid.instance_parent.empty()) return {}; // its tree is its parent's, walked on its own
+    return walk.tree();
 }
 
 } // namespace voxwarp::vdb_internal

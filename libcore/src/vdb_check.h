@@ -35,10 +35,16 @@ VdbLayout read_vdb_layout(const std::string& path, std::uint64_t size);
 std::string base_name(const std::string& unique_name);
 std::string lookup_name(const std::string& unique_name);
 
+/// The nodes a float grid's tree holds: what reading it allocates.
+struct TreeNodeCounts {
+    std::uint64_t upper = 0, lower = 0, leaves = 0; ///< 32^3 and 16^3 internal nodes, 8^3 leaves
+};
+
 /// Walks the float grid `grid` of `layout` (its metadata, transform, tree topology and voxel blocks) as OpenVDB
 /// 10's reader will read it, so that the reader meets no count or size it cannot hold. Every block's size is checked
-/// against the node it will be read into, every count against the bytes left in the grid.
+/// against the node it will be read into, every count against the bytes left in the grid. Returns the tree's nodes
+/// (none where the layout or the grid's transform is one the walk leaves to OpenVDB, or the grid is an instance).
 /// @throw InvalidInput naming `path`, the grid and the byte where the walk found a size the reader would overrun.
-void check_float_grid(const std::string& path, const VdbLayout& layout, const VdbGridEntry& grid);
+TreeNodeCounts check_float_grid(const std::string& path, const VdbLayout& layout, const VdbGridEntry& grid);
 
 } // namespace voxwarp::vdb_internal

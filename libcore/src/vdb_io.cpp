@@ -60,10 +60,18 @@ openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::stri
                 break;
             }
         if (!wanted) throw no_grid();
-        vdb_internal::check_float_grid(path, layout, *wanted);
+        vdb_internal::TreeNodeCounts nodes = vdb_internal::check_float_grid(path, layout, *wanted);
         if (!wanted->instance_parent.empty())
             for (const auto& g : layout.grids)
-                if (g.unique_name == wanted->instance_parent && is_float_tree(g.type)) vdb_internal::check_float_grid(path, layout, g);
+                if (g.unique_name == wanted->instance_parent && is_float_tree(g.type)) nodes = vdb_internal::check_float_grid(path, layout, g);
+        // What the tree takes in memory, before OpenVDB builds it: a damaged topology can ask for 30 times the
+        // file's bytes (each 64-byte leaf mask becomes a leaf with a 2 KiB buffer).
+        using Upper = openvdb::FloatTree::RootNodeType::ChildNodeType;
+        using Lower = Upper::ChildNodeType;
+        using Leaf = Lower::ChildNodeType;
+        require_memory(nodes.upper * sizeof(Upper) + nodes.lower * sizeof(Lower) + nodes.leaves * (sizeof(Leaf) + Leaf::SIZE * sizeof(float)), 0,
+                       path + ": reading grid '" + internal::excerpt(vdb_internal::base_name(wanted->unique_name), 60) + "' (" +
+                           std::to_string(nodes.leaves) + " leaves)");
     }
     openvdb::GridPtrVecPtr grids;
     try {
