@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <map>
+#include <set>
 #include <fstream>
 
 namespace voxwarp {
@@ -305,7 +306,13 @@ TEST(Attributes, ObjGroupsAreReadWrittenAndCarriedThroughARemesh) {
         const auto& f = cube.triangles[t];
         text += "f " + std::to_string(f[0] + 1) + " " + std::to_string(f[1] + 1) + " " + std::to_string(f[2] + 1) + "\n";
     }
-    text += "g\nf 1 2 3\n"; // after a bare "g": in no group (a sliver, overlapping the first face)
+    // After a bare "g": a face in no group, over the cube's vertices 0, 1 and the first k that makes no triangle the
+    // cube has (the cube's own triangle 0 1 2 would be read as a repeat and dropped).
+    std::set<std::array<std::int32_t, 3>> existing;
+    for (auto f : cube.triangles) std::sort(f.begin(), f.end()), existing.insert(f);
+    std::int32_t k = 2;
+    while (existing.count({0, 1, k})) ++k;
+    text += "g\nf 1 2 " + std::to_string(k + 1) + "\n";
     write_text(dir / "cube.obj", text);
     const TriangleMesh read = read_mesh((dir / "cube.obj").string());
     ASSERT_EQ(read.groups, std::vector<std::string>(sides, sides + 6));
@@ -318,7 +325,7 @@ TEST(Attributes, ObjGroupsAreReadWrittenAndCarriedThroughARemesh) {
     EXPECT_EQ(again.groups, read.groups);
     EXPECT_EQ(again.triangle_groups, read.triangle_groups);
 
-    // Remeshed at 32 (without the sliver): every output triangle in one group, the group of the side it lies on;
+    // Remeshed at 32 (without that face): every output triangle in one group, the group of the side it lies on;
     // within a voxel of the cube's edges and corners, where the split along the pushed-forward group boundary
     // leaves thin triangles, of one of the sides there.
     TriangleMesh solid = read;
