@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <openvdb/io/File.h>
+#include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetSphere.h>
 
@@ -357,38 +358,49 @@ TEST(VdbIO, BlockSizesTheReaderWouldOverrunAreRefused) {
     // the buffer's: a damaged size overran the heap (found by damaging bytes at random: 5 crashes in 240 files).
     // Each blosc block's size field is found by its header (the compressed size repeated 20 bytes on) and made to
     // claim 64 KiB raw, or more compressed bytes than the file holds; each file is refused before OpenVDB reads it.
+    // The same in a file written as a stream (no table of grids: OpenVDB reads every grid on opening it).
     openvdb::initialize();
     auto sphere = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(1.0f, openvdb::Vec3f(0.0f), 0.1f);
     sphere->setName("density");
     TempDir dir;
-    write_grid(sphere, dir.file("whole.vdb"));
-    const std::string bytes = file_bytes(dir.file("whole.vdb"));
-    std::vector<std::size_t> sizes;
-    for (std::size_t at = 0; at + 24 <= bytes.size(); ++at) {
-        std::int64_t size = 0;
-        std::uint32_t header_size = 0;
-        std::memcpy(&size, bytes.data() + at, 8);
-        std::memcpy(&header_size, bytes.data() + at + 20, 4);
-        if (size > 16 && size < 4096 && std::uint32_t(size) == header_size) sizes.push_back(at);
-    }
-    ASSERT_GT(sizes.size(), 50u); // one per leaf and internal node
     int tried = 0;
-    for (std::size_t k = 0; k < sizes.size(); k += sizes.size() / 12) {
-        for (const std::int64_t claim : {std::int64_t(-65536), std::int64_t(1) << 40}) {
-            std::string damaged = bytes;
-            std::memcpy(damaged.data() + sizes[k], &claim, 8);
-            std::ofstream(dir.file("damaged.vdb"), std::ios::binary).write(damaged.data(), std::streamsize(damaged.size()));
-            SCOPED_TRACE("size at byte " + std::to_string(sizes[k]) + " set to " + std::to_string(claim));
-            try {
-                read_vdb_sparse(dir.file("damaged.vdb"));
-                ADD_FAILURE() << "a damaged block size was read";
-            } catch (const InvalidInput& e) {
-                EXPECT_NE(std::string(e.what()).find("truncated or corrupt .vdb file: grid 'density': a block"), std::string::npos) << e.what();
+    for (const bool stream : {false, true}) {
+        SCOPED_TRACE(stream ? "a stream" : "a file");
+        if (stream) {
+            std::ofstream os(dir.file("whole.vdb"), std::ios::binary);
+            openvdb::io::Stream(os).write(openvdb::GridCPtrVec{sphere});
+        } else {
+            write_grid(sphere, dir.file("whole.vdb"));
+        }
+        const std::string bytes = file_bytes(dir.file("whole.vdb"));
+        const double ball = 4.0 / 3.0 * M_PI;
+        EXPECT_NEAR(enclosed_volume(read_vdb_sparse(dir.file("whole.vdb"))), ball, 0.02 * ball);
+        std::vector<std::size_t> sizes;
+        for (std::size_t at = 0; at + 24 <= bytes.size(); ++at) {
+            std::int64_t size = 0;
+            std::uint32_t header_size = 0;
+            std::memcpy(&size, bytes.data() + at, 8);
+            std::memcpy(&header_size, bytes.data() + at + 20, 4);
+            if (size > 16 && size < 4096 && std::uint32_t(size) == header_size) sizes.push_back(at);
+        }
+        ASSERT_GT(sizes.size(), 50u); // one per leaf and internal node
+        for (std::size_t k = 0; k < sizes.size(); k += sizes.size() / 12) {
+            for (const std::int64_t claim : {std::int64_t(-65536), std::int64_t(1) << 40}) {
+                std::string damaged = bytes;
+                std::memcpy(damaged.data() + sizes[k], &claim, 8);
+                std::ofstream(dir.file("damaged.vdb"), std::ios::binary).write(damaged.data(), std::streamsize(damaged.size()));
+                SCOPED_TRACE("size at byte " + std::to_string(sizes[k]) + " set to " + std::to_string(claim));
+                try {
+                    read_vdb_sparse(dir.file("damaged.vdb"));
+                    ADD_FAILURE() << "a damaged block size was read";
+                } catch (const InvalidInput& e) {
+                    EXPECT_NE(std::string(e.what()).find("truncated or corrupt .vdb file: grid 'density': a block"), std::string::npos) << e.what();
+                }
+                ++tried;
             }
-            ++tried;
         }
     }
-    EXPECT_GE(tried, 24);
+    EXPECT_GE(tried, 48);
 }
 
 TEST(VdbIO, RandomDamageIsReadOrRefusedNeverFollowed) {

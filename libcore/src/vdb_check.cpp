@@ -254,6 +254,25 @@ private:
     TreeNodeCounts counts_;
 };
 
+/// One float grid walked from `start`, never past `end`.
+struct GridWalk {
+    TreeNodeCounts nodes;
+    std::uint64_t end = 0; ///< one past the grid's last byte
+    bool complete = false; ///< false where the walk stopped before the tree (a map type OpenVDB does not know)
+};
+
+GridWalk walk_float_grid(const std::string& path, std::uint64_t start, std::uint64_t end, const VdbGridEntry& grid) {
+    Cursor c(path, start, end, "grid '" + internal::excerpt(base_name(grid.unique_name), 60) + "': ");
+    FloatGridWalk walk(c, c.get<std::uint32_t>("the grid's compression flags"));
+    walk.metadata();
+    if (!walk.transform()) return {}; // OpenVDB refuses a map type it does not know, before the tree
+    GridWalk done;
+    if (grid.instance_parent.empty()) done.nodes = walk.tree(); // an instance's tree is its parent's
+    done.end = c.at();
+    done.complete = true;
+    return done;
+}
+
 } // namespace
 
 std::string base_name(const std::string& unique_name) { return unique_name.substr(0, unique_name.find(kSeparator)); }
@@ -281,7 +300,29 @@ VdbLayout read_vdb_layout(const std::string& path, std::uint64_t size) {
         c.string("a metadata type", 0);
         c.string("a metadata value", 0);
     }
-    if (!offsets) return layout; // a stream: its grids follow one another with no offsets to check
+    if (!offsets) { // a stream: its grids follow one another, each a descriptor without offsets and the grid
+        layout.stream = true;
+        if (layout.version < kFirstWalkableVersion) return layout;
+        const auto grids = c.get<std::int32_t>("the grid count");
+        if (grids < 0) c.fail("a grid count of " + std::to_string(grids));
+        for (std::int32_t g = 0; g < grids; ++g) {
+            VdbGridEntry entry;
+            entry.unique_name = c.string("a grid's name");
+            entry.type = c.string("a grid's type");
+            entry.instance_parent = c.string("a grid's instance parent");
+            c.skip(24, "a grid's offsets"); // written, but not where the grid is
+            if (!is_float_tree(entry.type)) return layout; // a grid the walk cannot measure: OpenVDB reads the rest
+            entry.start = std::int64_t(c.at());
+            const GridWalk walk = walk_float_grid(path, std::uint64_t(entry.start), size, entry);
+            if (!walk.complete) return layout;
+            layout.stream_nodes += walk.nodes;
+            entry.end = std::int64_t(walk.end);
+            c.skip(walk.end - c.at(), "a grid");
+            layout.grids.push_back(std::move(entry));
+        }
+        layout.stream_walked = true;
+        return layout;
+    }
     const auto grids = c.get<std::int32_t>("the grid count");
     if (grids < 0) c.fail("a grid count of " + std::to_string(grids));
     for (std::int32_t g = 0; g < grids; ++g) {
@@ -306,12 +347,7 @@ VdbLayout read_vdb_layout(const std::string& path, std::uint64_t size) {
 
 TreeNodeCounts check_float_grid(const std::string& path, const VdbLayout& layout, const VdbGridEntry& grid) {
     if (!layout.walkable) return {};
-    Cursor c(path, std::uint64_t(grid.start), std::uint64_t(grid.end), "grid '" + internal::excerpt(base_name(grid.unique_name), 60) + "': ");
-    FloatGridWalk walk(c, c.get<std::uint32_t>("the grid's compression flags"));
-    walk.metadata();
-    if (!walk.transform()) return {}; // OpenVDB refuses a map type it does not know, before the tree
-    if (!grid.instance_parent.empty()) return {}; // its tree is its parent's, walked on its own
-    return walk.tree();
+    return walk_float_grid(path, std::uint64_t(grid.start), std::uint64_t(grid.end), grid).nodes;
 }
 
 } // namespace voxwarp::vdb_internal

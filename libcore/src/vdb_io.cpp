@@ -37,8 +37,6 @@ void write_density_grid(openvdb::FloatGrid::Ptr grid, const std::array<std::int6
     });
 }
 
-bool is_float_tree(const std::string& type) { return type == "Tree_float_5_4_3" || type == "Tree_float_5_4_3_HalfFloat"; }
-
 openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::string& grid_name) {
     openvdb::initialize();
     std::error_code ec;
@@ -50,12 +48,23 @@ openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::stri
     auto no_grid = [&]() {
         return InvalidInput(path + (grid_name.empty() ? ": holds no float grid" : ": holds no float grid named '" + grid_name + "'"));
     };
+    // What a tree takes in memory, before OpenVDB builds it: a damaged topology can ask for 30 times the file's
+    // bytes (each 64-byte leaf mask becomes a leaf with a 2 KiB buffer).
+    auto require_tree_memory = [&](const vdb_internal::TreeNodeCounts& nodes, const std::string& what) {
+        using Upper = openvdb::FloatTree::RootNodeType::ChildNodeType;
+        using Lower = Upper::ChildNodeType;
+        using Leaf = Lower::ChildNodeType;
+        require_memory(nodes.upper * sizeof(Upper) + nodes.lower * sizeof(Lower) + nodes.leaves * (sizeof(Leaf) + Leaf::SIZE * sizeof(float)), 0,
+                       path + ": reading " + what + " (" + std::to_string(nodes.leaves) + " leaves)");
+    };
     // Where the file's table of grids was read, only the grid wanted is read, and only after walking it (OpenVDB's
-    // reader overruns its buffers on some damaged sizes; vdb_check.cpp). Otherwise OpenVDB reads every grid.
+    // reader overruns its buffers on some damaged sizes; vdb_check.cpp). A stream's grids were walked with its
+    // layout (OpenVDB reads them all on opening it). Otherwise OpenVDB reads every grid unchecked.
     const vdb_internal::VdbGridEntry* wanted = nullptr;
+    if (layout.stream_walked) require_tree_memory(layout.stream_nodes, "every grid");
     if (layout.walkable) {
         for (const auto& g : layout.grids)
-            if (is_float_tree(g.type) && (grid_name.empty() || vdb_internal::base_name(g.unique_name) == grid_name)) {
+            if (vdb_internal::is_float_tree(g.type) && (grid_name.empty() || vdb_internal::base_name(g.unique_name) == grid_name)) {
                 wanted = &g;
                 break;
             }
@@ -63,15 +72,8 @@ openvdb::FloatGrid::Ptr read_float_grid(const std::string& path, const std::stri
         vdb_internal::TreeNodeCounts nodes = vdb_internal::check_float_grid(path, layout, *wanted);
         if (!wanted->instance_parent.empty())
             for (const auto& g : layout.grids)
-                if (g.unique_name == wanted->instance_parent && is_float_tree(g.type)) nodes = vdb_internal::check_float_grid(path, layout, g);
-        // What the tree takes in memory, before OpenVDB builds it: a damaged topology can ask for 30 times the
-        // file's bytes (each 64-byte leaf mask becomes a leaf with a 2 KiB buffer).
-        using Upper = openvdb::FloatTree::RootNodeType::ChildNodeType;
-        using Lower = Upper::ChildNodeType;
-        using Leaf = Lower::ChildNodeType;
-        require_memory(nodes.upper * sizeof(Upper) + nodes.lower * sizeof(Lower) + nodes.leaves * (sizeof(Leaf) + Leaf::SIZE * sizeof(float)), 0,
-                       path + ": reading grid '" + internal::excerpt(vdb_internal::base_name(wanted->unique_name), 60) + "' (" +
-                           std::to_string(nodes.leaves) + " leaves)");
+                if (g.unique_name == wanted->instance_parent && vdb_internal::is_float_tree(g.type)) nodes = vdb_internal::check_float_grid(path, layout, g);
+        require_tree_memory(nodes, "grid '" + internal::excerpt(vdb_internal::base_name(wanted->unique_name), 60) + "'");
     }
     openvdb::GridPtrVecPtr grids;
     try {
