@@ -300,29 +300,10 @@ VdbLayout read_vdb_layout(const std::string& path, std::uint64_t size) {
         c.string("a metadata type", 0);
         c.string("a metadata value", 0);
     }
-    if (!offsets) { // a stream: its grids follow one another, each a descriptor without offsets and the grid
-        layout.stream = true;
-        if (layout.version < kFirstWalkableVersion) return layout;
-        const auto grids = c.get<std::int32_t>("the grid count");
-        if (grids < 0) c.fail("a grid count of " + std::to_string(grids));
-        for (std::int32_t g = 0; g < grids; ++g) {
-            VdbGridEntry entry;
-            entry.unique_name = c.string("a grid's name");
-            entry.type = c.string("a grid's type");
-            entry.instance_parent = c.string("a grid's instance parent");
-            c.skip(24, "a grid's offsets"); // written, but not where the grid is
-            if (!is_float_tree(entry.type)) return layout; // a grid the walk cannot measure: OpenVDB reads the rest
-            entry.start = std::int64_t(c.at());
-            const GridWalk walk = walk_float_grid(path, std::uint64_t(entry.start), size, entry);
-            if (!walk.complete) return layout;
-            layout.stream_nodes += walk.nodes;
-            entry.end = std::int64_t(walk.end);
-            c.skip(walk.end - c.at(), "a grid");
-            layout.grids.push_back(std::move(entry));
-        }
-        layout.stream_walked = true;
-        return layout;
-    }
+    // A stream (no offsets) has its grids one after another, each a descriptor and the grid; OpenVDB reads them all
+    // on opening it, so each is walked here, as far as the walk can measure them.
+    layout.stream = !offsets;
+    if (layout.stream && layout.version < kFirstWalkableVersion) return layout;
     const auto grids = c.get<std::int32_t>("the grid count");
     if (grids < 0) c.fail("a grid count of " + std::to_string(grids));
     for (std::int32_t g = 0; g < grids; ++g) {
@@ -331,17 +312,27 @@ VdbLayout read_vdb_layout(const std::string& path, std::uint64_t size) {
         entry.type = c.string("a grid's type");
         entry.instance_parent = c.string("a grid's instance parent");
         std::int64_t position[3]; // the grid's start, its data blocks' start (0 for an instance: it has none), its end
-        c.read(position, sizeof position, "a grid's offsets");
-        const bool blocks_inside = (position[1] == 0 && !entry.instance_parent.empty()) || (position[0] <= position[1] && position[1] <= position[2]);
-        if (!(std::int64_t(c.at()) <= position[0] && position[0] <= position[2] && blocks_inside && std::uint64_t(position[2]) <= size))
-            throw InvalidInput(path + ": truncated or corrupt .vdb file: grid " + std::to_string(g) + " ends at byte " + std::to_string(position[2]) +
-                               " (the file holds " + std::to_string(size) + " bytes)");
-        entry.start = position[0];
-        entry.end = position[2];
+        c.read(position, sizeof position, "a grid's offsets"); // a stream writes them too, unset
+        if (layout.stream) {
+            if (!is_float_tree(entry.type)) return layout; // a grid the walk cannot measure: OpenVDB reads the rest
+            entry.start = std::int64_t(c.at());
+            const GridWalk walk = walk_float_grid(path, c.at(), size, entry);
+            if (!walk.complete) return layout;
+            layout.stream_nodes += walk.nodes;
+            entry.end = std::int64_t(walk.end);
+        } else {
+            const bool blocks_inside = (position[1] == 0 && !entry.instance_parent.empty()) || (position[0] <= position[1] && position[1] <= position[2]);
+            if (!(std::int64_t(c.at()) <= position[0] && position[0] <= position[2] && blocks_inside && std::uint64_t(position[2]) <= size))
+                throw InvalidInput(path + ": truncated or corrupt .vdb file: grid " + std::to_string(g) + " ends at byte " + std::to_string(position[2]) +
+                                   " (the file holds " + std::to_string(size) + " bytes)");
+            entry.start = position[0];
+            entry.end = position[2];
+        }
+        c.skip(std::uint64_t(entry.end) - c.at(), "a grid");
         layout.grids.push_back(std::move(entry));
-        c.skip(std::uint64_t(position[2]) - c.at(), "a grid");
     }
-    layout.walkable = layout.version >= kFirstWalkableVersion;
+    layout.stream_walked = layout.stream;
+    layout.walkable = !layout.stream && layout.version >= kFirstWalkableVersion;
     return layout;
 }
 
