@@ -31,6 +31,10 @@ ProgressCallback stderr_progress(const Global& global);
 /// Print an informational line to stderr unless quiet.
 void note(const Global& global, const std::string& line);
 
+/// read_mesh, with the problems that do not stop the reading (a missing .mtl or texture, repeated faces) printed as
+/// "voxwarp: warning: ..." lines on stderr.
+TriangleMesh read_mesh_warning(const std::string& path);
+
 /// The attributes a mesh carries, as a comma-separated list ("texture coordinates, normals, vertex colours,
 /// materials, groups"; with `counts`, each with its number: "3225 texture coordinates, 1 material"); empty: none.
 std::string attributes_of(const TriangleMesh& mesh, bool counts);

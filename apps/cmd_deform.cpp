@@ -93,9 +93,7 @@ void add_mesh_options(CLI::App* cmd, DeformArgs& a) {
 void run_mesh_job(const Global& global, DeformArgs& a, const EditScript& script, Clock::time_point start) {
     DeformReport report;
     auto t = Clock::now();
-    std::vector<std::string> warnings;
-    const TriangleMesh mesh = read_mesh(a.input, &warnings);
-    for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+    const TriangleMesh mesh = read_mesh_warning(a.input);
     report.seconds_read = seconds_since(t);
     TriangleMesh out = attributing_errors(a, [&] {
         return a.mode == "vertex" ? deform_vertices(mesh, script, a.options, report) : deform_mesh(mesh, script, a.options, report);

@@ -192,9 +192,7 @@ void add_edit(CLI::App& app, Global& global, Action& action) {
                 throw CLI::ValidationError("--token", "expected 16 to 256 letters, digits, '-', '_', '.' or '~'");
         }
         action = [a, &global] {
-            std::vector<std::string> warnings;
-            TriangleMesh mesh = read_mesh(a->mesh, &warnings); // drag previews carry no attributes (DeformSession)
-            for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+            TriangleMesh mesh = read_mesh_warning(a->mesh); // drag previews carry no attributes (DeformSession)
             std::string initial_edit;
             if (!a->edits.empty()) {
                 read_edit_file(a->edits); // refused here, with the file's name, rather than in the page

@@ -14,9 +14,7 @@ namespace voxwarp::cli {
 namespace {
 
 void print_mesh_info(const std::string& path) {
-    std::vector<std::string> warnings;
-    const TriangleMesh mesh = read_mesh(path, &warnings);
-    for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+    const TriangleMesh mesh = read_mesh_warning(path);
     const MeshTopology t = topology(mesh);
     const Bounds b = bounds(mesh);
     std::printf("file: %s\nkind: mesh\nvertices: %zu (%lld referenced)\ntriangles: %zu\nedges: %lld\n", path.c_str(), mesh.vertices.size(),

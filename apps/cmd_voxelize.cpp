@@ -36,9 +36,7 @@ void add_voxelize(CLI::App& app, Global& global, Action& action) {
             o.report = &done;
             o.max_memory_bytes = gib_to_bytes(args->max_memory_gib);
             o.progress = stderr_progress(global);
-            std::vector<std::string> warnings;
-            const TriangleMesh mesh = read_mesh(args->input, &warnings);
-            for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+            const TriangleMesh mesh = read_mesh_warning(args->input);
             const SparseVoxmap voxmap = naming_source(args->input, [&] { return voxelize_sparse(mesh, o); });
             write_vdb(voxmap, args->output);
             const auto& n = voxmap.dims();

@@ -2,6 +2,7 @@
 #include "cli_common.h"
 
 #include <voxwarp/errors.h>
+#include <voxwarp/mesh_io.h>
 
 #include <tbb/global_control.h>
 
@@ -38,6 +39,13 @@ ProgressCallback stderr_progress(const Global& global) {
 
 void note(const Global& global, const std::string& line) {
     if (!global.quiet) std::fprintf(stderr, "voxwarp: %s\n", line.c_str());
+}
+
+TriangleMesh read_mesh_warning(const std::string& path) {
+    std::vector<std::string> warnings;
+    TriangleMesh mesh = read_mesh(path, &warnings);
+    for (const auto& w : warnings) std::fprintf(stderr, "voxwarp: warning: %s\n", w.c_str());
+    return mesh;
 }
 
 std::string attributes_of(const TriangleMesh& mesh, bool counts) {
