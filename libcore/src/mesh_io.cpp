@@ -182,20 +182,6 @@ std::size_t drop_repeated_triangles(TriangleMesh& mesh) {
     return dropped;
 }
 
-TriangleMesh read_mesh_as_written(const std::string& path, std::vector<std::string>* warnings);
-
-} // namespace
-
-TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnings) {
-    TriangleMesh mesh = read_mesh_as_written(path, warnings);
-    if (const std::size_t dropped = drop_repeated_triangles(mesh); dropped > 0 && warnings)
-        warnings->push_back(path + ": " + std::to_string(dropped) + (dropped == 1 ? " triangle repeats" : " triangles repeat") +
-                            " the corners of an earlier one; each is read once");
-    return mesh;
-}
-
-namespace {
-
 TriangleMesh read_mesh_as_written(const std::string& path, std::vector<std::string>* warnings) {
     static QuietOpenMesh quiet;
     namespace fs = std::filesystem;
@@ -258,6 +244,14 @@ TriangleMesh read_mesh_as_written(const std::string& path, std::vector<std::stri
 }
 
 } // namespace
+
+TriangleMesh read_mesh(const std::string& path, std::vector<std::string>* warnings) {
+    TriangleMesh mesh = read_mesh_as_written(path, warnings);
+    if (const std::size_t dropped = drop_repeated_triangles(mesh); dropped > 0 && warnings)
+        warnings->push_back(path + ": " + std::to_string(dropped) + (dropped == 1 ? " triangle repeats" : " triangles repeat") +
+                            " the corners of an earlier one; each is read once");
+    return mesh;
+}
 
 void write_mesh(const TriangleMesh& mesh, const std::string& path) {
     static QuietOpenMesh quiet;
