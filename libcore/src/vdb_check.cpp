@@ -11,6 +11,7 @@
 #include <voxwarp_internal/messages.h>
 
 #include <openvdb/Metadata.h>
+#include <openvdb/io/Compression.h>
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
@@ -159,7 +160,7 @@ private:
     /// An internal node (log2 side 5 or 4) and everything below it; each leaf's active count appended to `leaves`.
     void node(int log2, std::vector<std::uint16_t>& leaves) {
         ++(log2 == 5 ? counts_.upper : counts_.lower);
-        std::vector<std::uint64_t> child_mask, value_mask;
+        std::vector<std::uint64_t> child_mask, value_mask, leaf_mask;
         mask(log2, child_mask, "an internal node's child mask");
         const std::uint32_t active = mask(log2, value_mask, "an internal node's value mask");
         values(std::uint32_t(1) << (3 * log2), active);
@@ -168,7 +169,6 @@ private:
                 if (log2 == 5) {
                     node(4, leaves);
                 } else {
-                    std::vector<std::uint64_t> leaf_mask;
                     leaves.push_back(std::uint16_t(mask(3, leaf_mask, "a leaf's value mask")));
                     ++counts_.leaves;
                 }
@@ -177,11 +177,14 @@ private:
 
     /// io::readCompressedValues for `count` values of a node whose value mask has `active` bits on.
     void values(std::uint32_t count, std::uint32_t active) {
+        using namespace openvdb::io; // the mask flag's values
         const auto metadata = c_.get<std::int8_t>("a block's mask flag");
-        if (metadata == 2 || metadata == 4 || metadata == 5) c_.skip(4, "a block's inactive value"); // one inactive value
-        if (metadata == 5) c_.skip(4, "a block's second inactive value");
-        if (metadata == 3 || metadata == 4 || metadata == 5) c_.skip(count / 8, "a block's selection mask");
-        const std::uint32_t stored = (compression_ & openvdb::io::COMPRESS_ACTIVE_MASK) && metadata != 6 ? active : count;
+        if (metadata == NO_MASK_AND_ONE_INACTIVE_VAL || metadata == MASK_AND_ONE_INACTIVE_VAL || metadata == MASK_AND_TWO_INACTIVE_VALS)
+            c_.skip(4, "a block's inactive value");
+        if (metadata == MASK_AND_TWO_INACTIVE_VALS) c_.skip(4, "a block's second inactive value");
+        if (metadata == MASK_AND_NO_INACTIVE_VALS || metadata == MASK_AND_ONE_INACTIVE_VAL || metadata == MASK_AND_TWO_INACTIVE_VALS)
+            c_.skip(count / 8, "a block's selection mask");
+        const std::uint32_t stored = (compression_ & COMPRESS_ACTIVE_MASK) && metadata != NO_MASK_AND_ALL_VALS ? active : count;
         if (half_ && stored == 0) return; // io::HalfReader reads nothing for no values (a full float block keeps its size field)
         block(std::uint64_t(stored) * (half_ ? 2 : 4));
     }
