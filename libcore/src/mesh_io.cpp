@@ -210,17 +210,7 @@ TriangleMesh read_mesh_as_written(const std::string& path, std::vector<std::stri
 
     SoupImporter importer;
     IO::Options options(IO::Options::VertexColor | IO::Options::VertexTexCoord | IO::Options::VertexNormal);
-    if (lower_extension(path) == ".om") {
-        // The OM reader rebuilds halfedge connectivity, so it needs a real halfedge mesh behind it.
-        OutputMesh om;
-        if (!IO::read_mesh(om, path)) throw InvalidInput(path + ": cannot parse as an OpenMesh .om file");
-        for (auto v : om.vertices()) importer.add_vertex(om.point(v));
-        for (auto f : om.faces()) {
-            IO::BaseImporter::VHandles ids;
-            for (auto v : om.fv_range(f)) ids.push_back(v);
-            importer.add_face(ids);
-        }
-    } else if (!IO::IOManager().read(path, importer, options)) {
+    if (!IO::IOManager().read(path, importer, options)) {
         throw InvalidInput(path + ": cannot parse as a " + lower_extension(path).substr(1) + " mesh" +
                            (importer.first_problem.empty() ? "" : ": " + importer.first_problem));
     }

@@ -1,7 +1,7 @@
 // Fast readers for the common text formats and binary STL: one pass over the file in memory with
 // std::from_chars, validating as they go (the same checks and messages as mesh_validate.cpp). OpenMesh's
-// readers, behind a separate validating pass, took seconds on a 1.7 M-triangle OBJ; PLY, ASCII STL, the
-// OFF variants and .om still go through OpenMesh.
+// readers, behind a separate validating pass, took seconds on a 1.7 M-triangle OBJ; PLY, ASCII STL and the
+// OFF variants still go through OpenMesh. .om has a reader of its own (om_read.cpp).
 #include "mesh_validate.h"
 
 #include <voxwarp/errors.h>
@@ -334,6 +334,10 @@ TriangleMesh read_binary_stl(const std::string& path, std::string_view bytes) {
 } // namespace
 
 bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh, std::vector<std::string>& warnings) {
+    if (ext == ".om") {
+        mesh = read_om(path, read_whole(path, file_size));
+        return true;
+    }
     if (ext == ".obj") {
         std::vector<std::string> libraries;
         mesh = read_obj(path, read_whole(path, file_size), libraries);

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <voxwarp/triangle_mesh.h>
@@ -18,6 +19,11 @@ std::string read_head(const std::string& path, std::uintmax_t file_size);
 /// false for the formats and variants left to OpenMesh. @throw InvalidInput naming the file and what is wrong.
 /// Problems that do not stop the reading (a missing material library or texture) go to `warnings`.
 bool read_mesh_directly(const std::string& path, const std::string& ext, std::uintmax_t file_size, TriangleMesh& mesh, std::vector<std::string>& warnings);
+
+/// OpenMesh's binary .om (om_read.cpp): positions, faces (polygons fanned into triangles), vertex colours, vertex
+/// normals, and texture coordinates per vertex or per face corner (halfedge). Other chunks are checked and skipped.
+/// @throw InvalidInput naming the file, what is wrong and the byte where it was found.
+TriangleMesh read_om(const std::string& path, std::string_view bytes);
 
 /// Per-vertex texture coordinates and normals for formats that keep them per vertex (PLY, glTF): a vertex whose
 /// corners name different ones (a seam, a hard edge) is written once per (texture coordinate, normal) pair.
