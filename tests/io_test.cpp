@@ -1,3 +1,4 @@
+#include "fuzz/mesh_fuzz_extension.h"
 #include "test_helpers.h"
 
 #include <voxwarp/errors.h>
@@ -119,7 +120,7 @@ TEST(MeshIO, RepeatedFacesAreReadOnceWithAWarning) {
 }
 
 // Every input the fuzzers once choked on (tests/fuzz/regressions/mesh; first byte picks the format as in
-// fuzz_mesh_reader) must now be read or refused with InvalidInput, promptly (ctest's timeout catches a hang).
+// fuzz_mesh_reader, mesh_fuzz_extension) must now be read or refused with InvalidInput, promptly (ctest's timeout catches a hang).
 TEST(MeshIO, FuzzRegressionsFailCleanly) {
     TempDir dir;
     const fs::path folder = fs::path(VOXWARP_DATA_DIR) / ".." / "tests" / "fuzz" / "regressions" / "mesh";
@@ -128,8 +129,7 @@ TEST(MeshIO, FuzzRegressionsFailCleanly) {
         std::ifstream in(entry.path(), std::ios::binary);
         std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
         ASSERT_FALSE(bytes.empty());
-        static const char* extensions[] = {".obj", ".off", ".ply", ".stl"};
-        const std::string path = dir.file("case" + std::string(extensions[std::uint8_t(bytes[0]) % 4]));
+        const std::string path = dir.file("case" + std::string(mesh_fuzz_extension(std::uint8_t(bytes[0]))));
         std::ofstream(path, std::ios::binary) << bytes.substr(1);
         try {
             read_mesh(path);

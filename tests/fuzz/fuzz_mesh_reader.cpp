@@ -1,7 +1,9 @@
-// libFuzzer target: every mesh reader (OBJ, OFF, PLY, STL) on arbitrary bytes must either return a mesh or
-// throw voxwarp::Error; never crash, hang or exhaust memory. The first byte picks the format.
+// libFuzzer target: every mesh reader (OBJ, OFF, PLY, STL, .om) on arbitrary bytes must either return a mesh or
+// throw voxwarp::Error; never crash, hang or exhaust memory. The first byte picks the format (mesh_fuzz_extension).
 #include <voxwarp/errors.h>
 #include <voxwarp/mesh_io.h>
+
+#include "mesh_fuzz_extension.h"
 
 #include <unistd.h>
 
@@ -11,8 +13,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
     if (size < 1) return 0;
-    static const char* extensions[] = {".obj", ".off", ".ply", ".stl"};
-    const std::string path = "/tmp/voxwarp_fuzz_" + std::to_string(::getpid()) + extensions[data[0] % 4];
+    const std::string path = "/tmp/voxwarp_fuzz_" + std::to_string(::getpid()) + mesh_fuzz_extension(data[0]);
     if (std::FILE* f = std::fopen(path.c_str(), "wb")) {
         std::fwrite(data + 1, 1, size - 1, f);
         std::fclose(f);
