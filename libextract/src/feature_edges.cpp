@@ -148,7 +148,8 @@ private:
 } // namespace
 
 void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals,
-                              double cos_feature, const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& voxmap) {
+                              double cos_feature, const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& voxmap,
+                              std::vector<std::array<std::int32_t, 3>>& made_splits) {
     if (edges.empty()) return;
     const double h = voxmap.voxel_size();
     const double reach = 0.6 * h; // deeper than marching cubes' chamfer of a right-angled edge
@@ -204,6 +205,7 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
             vertices.pop_back();
             continue;
         }
+        made_splits.push_back({m, a, b});
         holders.leave(t1), holders.leave(t2);
         triangles[t1] = made[0], triangles[t2] = made[2];
         triangles.push_back(made[1]), triangles.push_back(made[3]);

@@ -220,6 +220,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     const double h = voxmap.voxel_size();
     const double cos_feature = std::cos(options.feature_angle * M_PI / 180.0);
     const std::size_t nv = mesh.vertices.size();
+    const std::vector<Eigen::Vector3d> marching = mesh.vertices;
     std::vector<std::uint8_t> on_grid_edge(nv); // each entry written by the pass below, as the normals' are
     std::vector<Eigen::Vector3d> normals(nv);
     std::unique_ptr<TriangleGrid> grid;
@@ -460,68 +461,99 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         fan.cycle = std::move(cycle);
         fan.point = point;
     });
-    std::vector<std::uint8_t> removed(nt, 0);
-    std::vector<std::array<std::int32_t, 3>> added;
-    for (const Fan& fan : fans) {
-        if (fan.cycle.empty()) continue;
-        const auto centre_index = std::int32_t(mesh.vertices.size());
-        mesh.vertices.push_back(fan.point);
-        for (auto f : fan.triangles) removed[f] = 1;
-        for (std::size_t i = 0; i < fan.cycle.size(); ++i) added.push_back({centre_index, fan.cycle[i], fan.cycle[(i + 1) % fan.cycle.size()]});
-    }
-    // The fans' triangles take the removed ones' places, then go after the rest: no copy of the whole mesh.
-    std::vector<std::array<std::int32_t, 3>> triangles = std::move(mesh.triangles);
-    std::vector<std::size_t> fan_triangles; // where each added triangle went
-    fan_triangles.reserve(added.size());
-    {
-        std::size_t free = 0;
-        for (const auto& t : added) {
-            while (free < nt && !removed[free]) ++free;
-            if (free < nt) triangles[free] = t, fan_triangles.push_back(free++);
-            else fan_triangles.push_back(triangles.size()), triangles.push_back(t);
+    // The fans not rejected, the flips between them, the splits on sharp edges and the unfolding, on a copy of
+    // marching cubes' triangles; then the crossings put back (uncross). A fan whose triangles still cross something
+    // once every corner is back is rejected, and the mesh built again without it: its cell keeps marching cubes'
+    // triangles, which cross nothing.
+    std::vector<std::uint8_t> rejected(fans.size(), 0);
+    auto build = [&](std::vector<std::int32_t>& fan_of_centre) {
+        TriangleMesh out;
+        out.vertices = mesh.vertices;
+        out.triangles = mesh.triangles;
+        std::vector<std::uint8_t> removed(nt, 0);
+        std::vector<std::array<std::int32_t, 3>> added;
+        for (std::size_t i = 0; i < fans.size(); ++i) {
+            const Fan& fan = fans[i];
+            if (fan.cycle.empty() || rejected[i]) continue;
+            fan_of_centre.push_back(std::int32_t(i));
+            const auto centre_index = std::int32_t(out.vertices.size());
+            out.vertices.push_back(fan.point);
+            for (auto f : fan.triangles) removed[f] = 1;
+            for (std::size_t i = 0; i < fan.cycle.size(); ++i) added.push_back({centre_index, fan.cycle[i], fan.cycle[(i + 1) % fan.cycle.size()]});
         }
-        // Removed places left over (the fans have fewer triangles than the loops they replace) lie after every
-        // fan triangle: close them up.
-        std::size_t kept = free;
-        for (std::size_t f = free; f < triangles.size(); ++f)
-            if (f >= nt || !removed[f]) triangles[kept++] = triangles[f];
-        triangles.resize(kept);
-    }
+        // The fans' triangles take the removed ones' places, then go after the rest: no copy of the whole mesh.
+        std::vector<std::array<std::int32_t, 3>> triangles = std::move(out.triangles);
+        std::vector<std::size_t> fan_triangles; // where each added triangle went
+        fan_triangles.reserve(added.size());
+        {
+            std::size_t free = 0;
+            for (const auto& t : added) {
+                while (free < nt && !removed[free]) ++free;
+                if (free < nt) triangles[free] = t, fan_triangles.push_back(free++);
+                else fan_triangles.push_back(triangles.size()), triangles.push_back(t);
+            }
+            // Removed places left over (the fans have fewer triangles than the loops they replace) lie after every
+            // fan triangle: close them up.
+            std::size_t kept = free;
+            for (std::size_t f = free; f < triangles.size(); ++f)
+                if (f >= nt || !removed[f]) triangles[kept++] = triangles[f];
+            triangles.resize(kept);
+        }
 
-    // Flip the edge between two fans whose centres both are feature vertices: the two centres join, along the
-    // sharp edge. Only where the centres are not joined yet and neither triangle turns over.
-    auto undirected = [&](std::int32_t a, std::int32_t b) { return a < b ? directed(a, b) : directed(b, a); };
-    std::vector<std::pair<std::uint64_t, std::size_t>> outer; // (the fan's outer edge, triangle), sorted
-    for (const std::size_t f : fan_triangles) outer.push_back({undirected(triangles[f][1], triangles[f][2]), f});
-    std::sort(outer.begin(), outer.end());
-    std::unordered_set<std::uint64_t> joined;
-    joined.reserve(3 * added.size());
-    for (const std::size_t f : fan_triangles) {
-        const auto& t = triangles[f];
-        for (int c = 0; c < 3; ++c) joined.insert(undirected(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
-    }
-    auto normal = [&](const std::array<std::int32_t, 3>& t) {
-        return Eigen::Vector3d((mesh.vertices[std::size_t(t[1])] - mesh.vertices[std::size_t(t[0])]).cross(mesh.vertices[std::size_t(t[2])] - mesh.vertices[std::size_t(t[0])]));
+        // Flip the edge between two fans whose centres both are feature vertices: the two centres join, along the
+        // sharp edge. Only where the centres are not joined yet and neither triangle turns over.
+        auto undirected = [&](std::int32_t a, std::int32_t b) { return a < b ? directed(a, b) : directed(b, a); };
+        std::vector<std::pair<std::uint64_t, std::size_t>> outer; // (the fan's outer edge, triangle), sorted
+        for (const std::size_t f : fan_triangles) outer.push_back({undirected(triangles[f][1], triangles[f][2]), f});
+        std::sort(outer.begin(), outer.end());
+        std::unordered_set<std::uint64_t> joined;
+        joined.reserve(3 * added.size());
+        for (const std::size_t f : fan_triangles) {
+            const auto& t = triangles[f];
+            for (int c = 0; c < 3; ++c) joined.insert(undirected(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
+        }
+        auto normal = [&](const std::array<std::int32_t, 3>& t) {
+            return Eigen::Vector3d((out.vertices[std::size_t(t[1])] - out.vertices[std::size_t(t[0])]).cross(out.vertices[std::size_t(t[2])] - out.vertices[std::size_t(t[0])]));
+        };
+        for (std::size_t i = 0, j = 0; i < outer.size(); i = j) {
+            while (j < outer.size() && outer[j].first == outer[i].first) ++j;
+            if (j - i < 2) continue;
+            auto &A = triangles[outer[i].second], &B = triangles[outer[j - 1].second];
+            // A = (f, v, w), B = (g, w, v) with f, g the fans' centres.
+            const std::int32_t f = A[0], g = B[0], v = A[1], w = A[2];
+            if (B[1] != w || B[2] != v || f == g || joined.count(undirected(f, g))) continue;
+            const std::array<std::int32_t, 3> A2{f, v, g}, B2{f, g, w};
+            const Eigen::Vector3d before = normal(A) + normal(B);
+            if (normal(A2).dot(before) <= 0 || normal(B2).dot(before) <= 0) continue;
+            if (normal(A2).dot(normal(B2)) <= -0.5 * normal(A2).norm() * normal(B2).norm()) continue; // folded
+            joined.erase(undirected(v, w));
+            joined.insert(undirected(f, g));
+            A = A2, B = B2;
+        }
+        out.triangles = std::move(triangles);
+        std::vector<std::array<std::int32_t, 3>> splits;
+        if (options.feature_surface) split_across_sharp_edges(out.vertices, out.triangles, normals, cos_feature, options.feature_surface->edges, voxmap, splits);
+        unfold(out.vertices, out.triangles, normals);
+        std::vector<std::uint32_t> crossing = uncross(out.vertices, out.triangles, marching, splits, h);
+        return std::pair(std::move(out), std::move(crossing));
     };
-    for (std::size_t i = 0, j = 0; i < outer.size(); i = j) {
-        while (j < outer.size() && outer[j].first == outer[i].first) ++j;
-        if (j - i < 2) continue;
-        auto &A = triangles[outer[i].second], &B = triangles[outer[j - 1].second];
-        // A = (f, v, w), B = (g, w, v) with f, g the fans' centres.
-        const std::int32_t f = A[0], g = B[0], v = A[1], w = A[2];
-        if (B[1] != w || B[2] != v || f == g || joined.count(undirected(f, g))) continue;
-        const std::array<std::int32_t, 3> A2{f, v, g}, B2{f, g, w};
-        const Eigen::Vector3d before = normal(A) + normal(B);
-        if (normal(A2).dot(before) <= 0 || normal(B2).dot(before) <= 0) continue;
-        if (normal(A2).dot(normal(B2)) <= -0.5 * normal(A2).norm() * normal(B2).norm()) continue; // folded
-        joined.erase(undirected(v, w));
-        joined.insert(undirected(f, g));
-        A = A2, B = B2;
+    for (int attempt = 0;; ++attempt) {
+        std::vector<std::int32_t> fan_of_centre;
+        auto [out, crossing] = build(fan_of_centre);
+        // The fans with a centre on a crossing triangle or next to one of its corners (a split on a sharp edge
+        // between fans is not a fan's own).
+        if (crossing.empty() || attempt == 3) return std::move(out);
+        std::vector<std::uint8_t> near_crossing(out.vertices.size(), 0);
+        for (const std::uint32_t f : crossing)
+            for (const auto v : out.triangles[f]) near_crossing[std::size_t(v)] = 1;
+        auto fan_at = [&](std::int32_t v) { return std::size_t(v) >= nv && std::size_t(v) - nv < fan_of_centre.size() ? fan_of_centre[std::size_t(v) - nv] : -1; };
+        bool again = false;
+        for (const auto& t : out.triangles)
+            if (near_crossing[std::size_t(t[0])] || near_crossing[std::size_t(t[1])] || near_crossing[std::size_t(t[2])])
+                for (const auto v : t)
+                    if (const std::int32_t fan = fan_at(v); fan >= 0 && !rejected[std::size_t(fan)]) rejected[std::size_t(fan)] = 1, again = true;
+        if (!again) return std::move(out);
     }
-    mesh.triangles = std::move(triangles);
-    if (options.feature_surface) split_across_sharp_edges(mesh.vertices, mesh.triangles, normals, cos_feature, options.feature_surface->edges, voxmap);
-    unfold(mesh.vertices, mesh.triangles, normals);
-    return mesh;
 }
 
 } // namespace voxwarp::extract_internal

@@ -180,13 +180,24 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
 /// The feature mesher's last step (feature_edges.cpp): each mesh edge that passes under one of the input's sharp
 /// `edges` (world units), its ends on either side, is split at the sharp edge's point nearest it; edges whose ends'
 /// `normals` (one per vertex of marching cubes' output, zero where unknown) agree within `cos_feature` lie on one
-/// face and are left. The mesh stays a closed 2-manifold.
+/// face and are left. The mesh stays a closed 2-manifold. Each split is appended to `splits` as (the new vertex,
+/// the edge's ends).
 void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals,
-                              double cos_feature, const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& voxmap);
+                              double cos_feature, const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& voxmap,
+                              std::vector<std::array<std::int32_t, 3>>& splits);
 
-/// The last pass: a triangle that faces against its corners' `normals` (folded in the plane of a face) has the
+/// After the splits: a triangle that faces against its corners' `normals` (folded in the plane of a face) has the
 /// edge it shares with a neighbour flipped, where the two new triangles face the right way. The mesh stays a
 /// closed 2-manifold.
 void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals);
+
+/// Puts back the corners of triangles that cross another (uncross.cpp), repeating while that changes something:
+/// a vertex of marching cubes to `marching` (their positions, the first of `vertices`), a split (split_across_sharp_
+/// edges' `splits`) to the middle of the edge it split, which undoes it. Crossing means each triangle passes through
+/// the other's plane by more than 1e-4 of `voxel_size`: sheets that only touch, or cross by less (round-off at a
+/// model's corners, where fans meet), do not count. Returns the triangles that still cross (with a fan's centre,
+/// which is not moved), ascending.
+std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const std::vector<std::array<std::int32_t, 3>>& triangles,
+                                   const std::vector<Eigen::Vector3d>& marching, const std::vector<std::array<std::int32_t, 3>>& splits, double voxel_size);
 
 } // namespace voxwarp::extract_internal
