@@ -462,9 +462,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         fan.point = point;
     });
     // The fans not rejected, the flips between them, the splits on sharp edges and the unfolding, on a copy of
-    // marching cubes' triangles; then the crossings put back (uncross). A fan whose triangles still cross something
-    // once every corner is back is rejected, and the mesh built again without it: its cell keeps marching cubes'
-    // triangles, which cross nothing.
+    // marching cubes' triangles; then the crossings put back (uncross). Where something still crosses once every
+    // corner is back, the fans on the crossing triangles or beside them are rejected and the mesh built again: their
+    // cells keep marching cubes' triangles. Four builds at most (the bundled edits need two).
     std::vector<std::uint8_t> rejected(fans.size(), 0);
     auto build = [&](std::vector<std::int32_t>& fan_of_centre) {
         TriangleMesh out;
@@ -479,9 +479,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             const auto centre_index = std::int32_t(out.vertices.size());
             out.vertices.push_back(fan.point);
             for (auto f : fan.triangles) removed[f] = 1;
-            for (std::size_t i = 0; i < fan.cycle.size(); ++i) added.push_back({centre_index, fan.cycle[i], fan.cycle[(i + 1) % fan.cycle.size()]});
+            for (std::size_t k = 0; k < fan.cycle.size(); ++k) added.push_back({centre_index, fan.cycle[k], fan.cycle[(k + 1) % fan.cycle.size()]});
         }
-        // The fans' triangles take the removed ones' places, then go after the rest: no copy of the whole mesh.
+        // The fans' triangles take the removed ones' places, then go after the rest: no second copy of the mesh.
         std::vector<std::array<std::int32_t, 3>> triangles = std::move(out.triangles);
         std::vector<std::size_t> fan_triangles; // where each added triangle went
         fan_triangles.reserve(added.size());
