@@ -117,8 +117,9 @@ struct OmContents {
     std::vector<Eigen::Vector3d> positions, vertex_normals;
     std::vector<Eigen::Vector3f> colours;
     std::vector<Eigen::Vector2d> vertex_uvs, halfedge_uvs;
-    // Version 2: the halfedge connectivity. Before 2: each face's vertices, one list after another.
-    std::vector<std::int64_t> face_halfedge, next, to_vertex, face_of;
+    // Version 2: a halfedge per face, and per halfedge as stored (the two of an edge after each other) its next
+    // halfedge, to-vertex and face. Before 2: each face's vertices, one list after another.
+    std::vector<std::int64_t> face_halfedge, halfedges;
     std::vector<std::uint32_t> polygon_sizes;
     std::vector<std::int64_t> polygon_corners;
 };
@@ -130,12 +131,13 @@ void read_chunk(Reader& in, OmContents& om, const ChunkHeader& h, std::uint64_t 
     auto unsupported = [&](const std::string& stored) {
         in.refuse(what + "chunk of type " + std::to_string(h.type) + " (" + stored + ") at byte " + std::to_string(in.at()) + ", which OpenMesh does not read either");
     };
-    auto vectors3 = [&](std::vector<Eigen::Vector3d>& out, const char* name) {
+    auto vectors3 = [&](std::vector<Eigen::Vector3d>* out, const char* name) { // null: skipped
         const int size = float_bytes(h);
         if (!h.is_float || size == 0 || h.dimensions != 3) unsupported(std::string(name) + " stored as other than 3 floats or doubles");
+        if (!out) return in.skip(count, 3u * std::uint64_t(size), what + name);
         in.need(count, 3u * std::uint64_t(size), what + name);
-        out.resize(std::size_t(count));
-        for (auto& v : out)
+        out->resize(std::size_t(count));
+        for (auto& v : *out)
             for (int a = 0; a < 3; ++a) v[a] = in.real(size);
     };
     auto uvs = [&](std::vector<Eigen::Vector2d>& out) {
@@ -155,16 +157,12 @@ void read_chunk(Reader& in, OmContents& om, const ChunkHeader& h, std::uint64_t 
     case kPosition:
         if (h.entity != kVertex) unsupported("positions");
         if (om.has_positions) in.refuse("a second chunk of vertex positions at byte " + std::to_string(in.at()));
-        vectors3(om.positions, "positions");
+        vectors3(&om.positions, "positions");
         om.has_positions = true;
         return;
     case kNormal:
         if (h.entity != kVertex && h.entity != kFace) unsupported("normals");
-        if (h.entity == kVertex) return vectors3(om.vertex_normals, "normals");
-        {
-            std::vector<Eigen::Vector3d> face_normals; // checked, not kept: voxwarp's normals are per corner
-            return vectors3(face_normals, "normals");
-        }
+        return vectors3(h.entity == kVertex ? &om.vertex_normals : nullptr, "normals"); // a face's: voxwarp's normals are per corner
     case kTexcoord:
         if (h.entity == kVertex) return uvs(om.vertex_uvs);
         if (h.entity == kHalfedge) return uvs(om.halfedge_uvs);
@@ -172,8 +170,8 @@ void read_chunk(Reader& in, OmContents& om, const ChunkHeader& h, std::uint64_t 
     case kColour:
         if (h.entity != kVertex && h.entity != kFace) unsupported("colours");
         if (h.is_float || h.size_code != 0 || h.dimensions != 3) unsupported("colours stored as other than 3 bytes");
-        in.need(count, 3, what + "colours");
         if (h.entity == kFace) return in.skip(count, 3, what + "colours");
+        in.need(count, 3, what + "colours");
         om.colours.resize(std::size_t(count));
         for (auto& c : om.colours)
             for (int a = 0; a < 3; ++a) c[a] = float(in.unsigned_int(1)) / 255.0f;
@@ -189,19 +187,8 @@ void read_chunk(Reader& in, OmContents& om, const ChunkHeader& h, std::uint64_t 
     case kTopology:
         if (h.entity == kVertex) return in.skip(count, std::uint64_t(1) << h.size_code, what + "connectivity"); // rebuilt from the faces
         if (h.entity == kHalfedge && om.version >= om_version(2, 0)) {
-            if (!om.next.empty()) in.refuse("a second chunk of halfedge connectivity at byte " + std::to_string(in.at()));
-            std::vector<std::int64_t> edges; // per edge: next, to-vertex, face of its first halfedge, then of its second
-            indices(edges, 3);
-            const std::size_t halfedges = edges.size() / 3;
-            om.next.resize(halfedges);
-            om.to_vertex.resize(halfedges);
-            om.face_of.resize(halfedges);
-            for (std::size_t i = 0; i < halfedges; ++i) {
-                om.next[i] = edges[3 * i];
-                om.to_vertex[i] = edges[3 * i + 1];
-                om.face_of[i] = edges[3 * i + 2];
-            }
-            return;
+            if (!om.halfedges.empty()) in.refuse("a second chunk of halfedge connectivity at byte " + std::to_string(in.at()));
+            return indices(om.halfedges, 3);
         }
         if (h.entity != kFace) unsupported("connectivity");
         if (!om.face_halfedge.empty() || !om.polygon_sizes.empty()) in.refuse("a second chunk of faces at byte " + std::to_string(in.at()));
@@ -276,10 +263,13 @@ TriangleMesh read_om(const std::string& path, std::string_view bytes) {
     };
     if (om.version >= om_version(2, 0)) {
         if (om.faces > 0 && om.face_halfedge.empty()) in.refuse("it has " + std::to_string(om.faces) + " faces but no chunk of them");
-        if (om.faces > 0 && om.next.empty()) in.refuse("it has " + std::to_string(om.faces) + " faces but no halfedge connectivity");
-        const std::int64_t halfedges = std::int64_t(om.next.size());
+        if (om.faces > 0 && om.halfedges.empty()) in.refuse("it has " + std::to_string(om.faces) + " faces but no halfedge connectivity");
+        const std::int64_t halfedges = std::int64_t(om.halfedges.size() / 3);
+        auto next = [&](std::int64_t h) { return om.halfedges[3 * std::size_t(h)]; };
+        auto to_vertex = [&](std::int64_t h) { return om.halfedges[3 * std::size_t(h) + 1]; };
+        auto face_of = [&](std::int64_t h) { return om.halfedges[3 * std::size_t(h) + 2]; };
         const bool keep_halfedges = !om.halfedge_uvs.empty();
-        std::vector<std::uint8_t> visited(om.next.size(), 0);
+        std::vector<std::uint8_t> visited(std::size_t(halfedges), 0);
         for (std::uint64_t f = 0; f < om.face_halfedge.size(); ++f) {
             polygon.clear();
             polygon_halfedges.clear();
@@ -289,12 +279,12 @@ TriangleMesh read_om(const std::string& path, std::string_view bytes) {
                 if (h < 0 || h >= halfedges)
                     in.refuse("face " + std::to_string(f) + " reaches halfedge " + std::to_string(h) + ", the file has " + std::to_string(halfedges));
                 if (visited[std::size_t(h)]) in.refuse("face " + std::to_string(f) + "'s loop of halfedges does not close (halfedge " + std::to_string(h) + " is met twice)");
-                if (om.face_of[std::size_t(h)] != std::int64_t(f))
-                    in.refuse("face " + std::to_string(f) + "'s loop of halfedges reaches halfedge " + std::to_string(h) + ", which belongs to face " + std::to_string(om.face_of[std::size_t(h)]));
+                if (face_of(h) != std::int64_t(f))
+                    in.refuse("face " + std::to_string(f) + "'s loop of halfedges reaches halfedge " + std::to_string(h) + ", which belongs to face " + std::to_string(face_of(h)));
                 visited[std::size_t(h)] = 1;
-                polygon.push_back(om.to_vertex[std::size_t(h)]);
+                polygon.push_back(to_vertex(h));
                 if (keep_halfedges) polygon_halfedges.push_back(h);
-                h = om.next[std::size_t(h)];
+                h = next(h);
             } while (h != first);
             add_polygon(f);
         }
