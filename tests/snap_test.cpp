@@ -28,32 +28,29 @@
 namespace voxwarp {
 namespace {
 
-bool self_intersects(const TriangleMesh& m) {
-    using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using SurfaceMesh = CGAL::Surface_mesh<K::Point_3>;
+
+SurfaceMesh surface_mesh(const TriangleMesh& m) {
     std::vector<K::Point_3> points;
     for (const auto& v : m.vertices) points.emplace_back(v.x(), v.y(), v.z());
     std::vector<std::vector<std::size_t>> faces;
     for (const auto& t : m.triangles) faces.push_back({std::size_t(t[0]), std::size_t(t[1]), std::size_t(t[2])});
-    CGAL::Surface_mesh<K::Point_3> mesh;
+    SurfaceMesh mesh;
     CGAL::Polygon_mesh_processing::polygon_soup_to_polygon_mesh(points, faces, mesh);
-    return CGAL::Polygon_mesh_processing::does_self_intersect(mesh);
+    return mesh;
 }
+
+bool self_intersects(const TriangleMesh& m) { return CGAL::Polygon_mesh_processing::does_self_intersect(surface_mesh(m)); }
 
 /// Pairs of triangles that cross deeper than `depth` (world units): CGAL finds them meeting, and each passes through
 /// the other's plane by more than `depth` on both sides. Two that only touch at a common point (at a model's
 /// corner the feature mesher puts several fans' centres on one point, as distinct vertices) do not count.
 std::size_t crossings_deeper_than(const TriangleMesh& m, double depth) {
-    using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-    std::vector<K::Point_3> points;
-    for (const auto& v : m.vertices) points.emplace_back(v.x(), v.y(), v.z());
-    std::vector<std::vector<std::size_t>> faces;
-    for (const auto& t : m.triangles) faces.push_back({std::size_t(t[0]), std::size_t(t[1]), std::size_t(t[2])});
-    using Mesh = CGAL::Surface_mesh<K::Point_3>;
-    Mesh mesh;
-    CGAL::Polygon_mesh_processing::polygon_soup_to_polygon_mesh(points, faces, mesh);
-    std::vector<std::pair<Mesh::Face_index, Mesh::Face_index>> pairs;
+    const SurfaceMesh mesh = surface_mesh(m);
+    std::vector<std::pair<SurfaceMesh::Face_index, SurfaceMesh::Face_index>> pairs;
     CGAL::Polygon_mesh_processing::self_intersections(mesh, std::back_inserter(pairs));
-    auto corners = [&](Mesh::Face_index f) {
+    auto corners = [&](SurfaceMesh::Face_index f) {
         std::vector<K::Point_3> p;
         for (auto v : mesh.vertices_around_face(mesh.halfedge(f))) p.push_back(mesh.point(v));
         return p;
