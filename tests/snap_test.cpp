@@ -22,6 +22,7 @@
 
 #include <gtest/gtest.h>
 
+#include <iostream>
 #include <random>
 #include <set>
 
@@ -43,10 +44,11 @@ SurfaceMesh surface_mesh(const TriangleMesh& m) {
 
 bool self_intersects(const TriangleMesh& m) { return CGAL::Polygon_mesh_processing::does_self_intersect(surface_mesh(m)); }
 
-/// Pairs of triangles that cross deeper than `depth` (world units): CGAL finds them meeting, and each passes through
-/// the other's plane by more than `depth` on both sides. Two that only touch at a common point (at a model's
-/// corner the feature mesher puts several fans' centres on one point, as distinct vertices) do not count.
-std::size_t crossings_deeper_than(const TriangleMesh& m, double depth) {
+/// Pairs of triangles that cross deeper than `depth` (world units), as indices into m.triangles: CGAL finds them
+/// meeting, and each passes through the other's plane by more than `depth` on both sides. Two that only touch at a
+/// common point (at a model's corner the feature mesher puts several fans' centres on one point, as distinct
+/// vertices) do not count.
+std::vector<std::pair<std::size_t, std::size_t>> crossing_pairs(const TriangleMesh& m, double depth) {
     const SurfaceMesh mesh = surface_mesh(m);
     std::vector<std::pair<SurfaceMesh::Face_index, SurfaceMesh::Face_index>> pairs;
     CGAL::Polygon_mesh_processing::self_intersections(mesh, std::back_inserter(pairs));
@@ -65,7 +67,7 @@ std::size_t crossings_deeper_than(const TriangleMesh& m, double depth) {
         }
         return std::min(above, -below);
     };
-    std::size_t deep = 0;
+    std::vector<std::pair<std::size_t, std::size_t>> deep;
     for (const auto& [f, g] : pairs) {
         const auto a = corners(f), b = corners(g);
         int common = 0, ia = 0, ib = 0;
@@ -75,10 +77,12 @@ std::size_t crossings_deeper_than(const TriangleMesh& m, double depth) {
         if (common == 1 && !CGAL::do_intersect(K::Segment_3(a[std::size_t((ia + 1) % 3)], a[std::size_t((ia + 2) % 3)]), K::Triangle_3(b[0], b[1], b[2])) &&
             !CGAL::do_intersect(K::Segment_3(b[std::size_t((ib + 1) % 3)], b[std::size_t((ib + 2) % 3)]), K::Triangle_3(a[0], a[1], a[2])))
             continue; // they touch at the common point
-        if (common < 2 && std::min(through(a, b), through(b, a)) > depth) ++deep;
+        if (common < 2 && std::min(through(a, b), through(b, a)) > depth) deep.push_back({std::size_t(f), std::size_t(g)});
     }
     return deep;
 }
+
+std::size_t crossings_deeper_than(const TriangleMesh& m, double depth) { return crossing_pairs(m, depth).size(); }
 
 /// A lattice over [-2, 2]^3 bent smoothly by `amount` (world units) of sine displacement.
 WarpStep bent_step(double amount) {
@@ -453,6 +457,45 @@ TEST(FeatureMesher, NoSheetCrossesAnotherOnTheBundledEdits) {
         EXPECT_EQ(crossings_deeper_than(out, 1e-3 * report.voxel_size), 0u);
         EXPECT_TRUE(topology(out).watertight());
     }
+}
+
+TEST(FeatureMesher, MarchingCubesTrianglesOfDifferentCellsNeverCrossWhereverTheirCornersSlideAlongTheirEdges) {
+    // What the crossing pass (uncross.cpp) relies on to test only the pairs that can cross: a triangle of marching
+    // cubes whose corners the feature mesher moved along their grid edges (onto the input's surface) cannot cross
+    // one of another cell; within one cell it can. Random fields, every corner then put anywhere on its grid edge
+    // (a third of them within a millionth of a voxel of an end).
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> uniform(0, 1);
+    std::size_t same_cell = 0, other_cells = 0, pairs_looked_at = 0;
+    for (int trial = 0; trial < 100; ++trial) {
+        Voxmap v({8, 7, 7}, Eigen::Vector3d(0.3, -0.2, 0.1), 0.5);
+        for (std::int64_t z = 1; z < 6; ++z)
+            for (std::int64_t y = 1; y < 6; ++y)
+                for (std::int64_t x = 1; x < 7; ++x) v.at(x, y, z) = float(uniform(rng) < 0.2 ? 0.5 + 2e-3 * (uniform(rng) - 0.5) : uniform(rng));
+        const TriangleMesh mesh = extract(v);
+        std::vector<Eigen::Vector3d> cell; // each triangle's cell, from its centre where marching cubes put it
+        for (const auto& t : mesh.triangles)
+            cell.push_back(v.index_of((mesh.vertices[std::size_t(t[0])] + mesh.vertices[std::size_t(t[1])] + mesh.vertices[std::size_t(t[2])]) / 3).array().floor());
+        pairs_looked_at += mesh.triangles.size() * (mesh.triangles.size() - 1) / 2;
+        for (int slide = 0; slide < 4; ++slide) {
+            TriangleMesh slid = mesh;
+            for (auto& p : slid.vertices) {
+                Eigen::Vector3d q = v.index_of(p);
+                int along = -1, off_grid = 0;
+                for (int axis = 0; axis < 3; ++axis)
+                    if (std::abs(q[axis] - std::round(q[axis])) > 1e-9) ++off_grid, along = axis;
+                if (off_grid != 1) continue; // a loop's centre, inside its cell
+                const double pick = uniform(rng);
+                q[along] = std::floor(q[along]) + (pick < 0.15 ? 1e-6 : pick < 0.3 ? 1 - 1e-6 : uniform(rng));
+                p = v.world(q.x(), q.y(), q.z());
+            }
+            for (const auto& [a, b] : crossing_pairs(slid, 1e-4 * v.voxel_size)) ++(cell[a] == cell[b] ? same_cell : other_cells);
+        }
+    }
+    std::cout << "[          ] pairs of triangles crossing once their corners slid: " << same_cell << " in one cell, " << other_cells << " in different cells, of "
+              << 4 * pairs_looked_at << " pairs\n";
+    EXPECT_GT(same_cell, 0u);
+    EXPECT_EQ(other_cells, 0u);
 }
 
 TEST(Snap, ABlockWhoseFacesLieOnVoxelPlanesComesOutWithoutDegenerateTriangles) {

@@ -213,7 +213,8 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     }
 }
 
-void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals) {
+std::vector<std::uint32_t> unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
+                                  const std::vector<Eigen::Vector3d>& normals) {
     auto reference = [&](std::initializer_list<std::int32_t> corners) {
         Eigen::Vector3d m = Eigen::Vector3d::Zero();
         for (auto v : corners)
@@ -225,7 +226,8 @@ void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array
         return !m.isZero() && !(area_normal(vertices, t).dot(m) > 0);
     };
     const std::vector<std::uint32_t> bad = select_in_parallel(triangles.size(), [&](std::size_t i) { return folded(triangles[i]); });
-    if (bad.empty()) return;
+    std::vector<std::uint32_t> rewritten;
+    if (bad.empty()) return rewritten;
     // Directed edges of the triangles around the folded ones.
     std::vector<std::uint8_t> near(vertices.size(), 0);
     for (const auto f : bad)
@@ -249,8 +251,10 @@ void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array
             holders.leave(f), holders.leave(u);
             triangles[f] = T2, triangles[u] = U2;
             holders.enter(f), holders.enter(u);
+            rewritten.push_back(f), rewritten.push_back(u);
         }
     }
+    return rewritten;
 }
 
 } // namespace voxwarp::extract_internal

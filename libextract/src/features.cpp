@@ -533,8 +533,8 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         out.triangles = std::move(triangles);
         std::vector<std::array<std::int32_t, 3>> splits;
         if (options.feature_surface) split_across_sharp_edges(out.vertices, out.triangles, normals, cos_feature, options.feature_surface->edges, voxmap, splits);
-        unfold(out.vertices, out.triangles, normals);
-        std::vector<std::uint32_t> crossing = uncross(out.vertices, out.triangles, marching, splits, h);
+        const std::vector<std::uint32_t> unfolded = unfold(out.vertices, out.triangles, normals);
+        std::vector<std::uint32_t> crossing = uncross(out.vertices, out.triangles, marching, splits, unfolded, voxmap);
         return std::pair(std::move(out), std::move(crossing));
     };
     for (int attempt = 0;; ++attempt) {

@@ -188,16 +188,20 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
 
 /// After the splits: a triangle that faces against its corners' `normals` (folded in the plane of a face) has the
 /// edge it shares with a neighbour flipped, where the two new triangles face the right way. The mesh stays a
-/// closed 2-manifold.
-void unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals);
+/// closed 2-manifold. Returns the triangles it rewrote.
+std::vector<std::uint32_t> unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
+                                  const std::vector<Eigen::Vector3d>& normals);
 
 /// Puts back the corners of triangles that cross another (uncross.cpp), repeating while that changes something:
 /// a vertex of marching cubes to `marching` (their positions, the first of `vertices`), a split (split_across_sharp_
-/// edges' `splits`) to the middle of the edge it split, which undoes it. Crossing means each triangle passes through
-/// the other's plane by more than 1e-4 of `voxel_size`: sheets that only touch, or cross by less (round-off at a
-/// model's corners, where fans meet), do not count. Returns the triangles that still cross (with a fan's centre,
-/// which is not moved), ascending.
+/// edges' `splits`) to the middle of the edge it split, which undoes it, a fan's centre to the middle of its loop.
+/// Crossing means each triangle passes through the other's plane by more than 1e-4 of the voxmap's voxel size:
+/// sheets that only touch, or cross by less (round-off at a model's corners, where fans meet), do not count.
+/// Relies on the triangles of marching cubes being in its order, each rewritten one (by unfold()) listed in
+/// `unfolded`, and every other triangle having a vertex the mesher added (a fan's centre, a split). Returns the
+/// triangles that still cross with every corner back, ascending.
 std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const std::vector<std::array<std::int32_t, 3>>& triangles,
-                                   const std::vector<Eigen::Vector3d>& marching, const std::vector<std::array<std::int32_t, 3>>& splits, double voxel_size);
+                                   const std::vector<Eigen::Vector3d>& marching, const std::vector<std::array<std::int32_t, 3>>& splits,
+                                   const std::vector<std::uint32_t>& unfolded, const SparseVoxmap& voxmap);
 
 } // namespace voxwarp::extract_internal

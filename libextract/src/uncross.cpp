@@ -14,7 +14,7 @@
 
 #include <algorithm>
 #include <limits>
-
+#include <numeric>
 namespace voxwarp::extract_internal {
 
 namespace {
@@ -61,78 +61,198 @@ bool cross(const std::vector<Eigen::Vector3d>& v, const std::array<std::int32_t,
     return false; // sharing an edge, each lies on one side of the other's plane
 }
 
-/// Pairs of triangles whose boxes meet, one of them marked in `some`: each corner's box is given (`lo`, `hi`), the
-/// box of every place the corner may take, so that pairs found once serve while corners move. The boxes are filed
-/// by the cells of side `cell` they cover, and a pair is reported by the cell holding the low corner of the two
-/// boxes' overlap only. CGAL's box_intersection_d took 0.26 s a call on the bunny ear edit at 256, where nearly
-/// every triangle is marked; this 0.17 s with cells of two voxels (0.26 s with one: each box in more cells).
-std::vector<std::pair<std::uint32_t, std::uint32_t>> meeting_boxes(const std::vector<Eigen::Vector3d>& lo, const std::vector<Eigen::Vector3d>& hi,
-                                                                   const std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<std::uint8_t>& some,
-                                                                   double cell) {
+/// Where the pass may put each vertex: where the mesher made it, and where it goes back to. A vertex of marching
+/// cubes goes back to its own place; a fan's centre to the middle of its loop; a split to the middle of the edge it
+/// split, whose ends move too. The box of every place a vertex may take is kept for the mesher's vertices only:
+/// marching cubes' are the box of their two places.
+class Reach {
+public:
+    Reach(const std::vector<Eigen::Vector3d>& made, const std::vector<Eigen::Vector3d>& marching) : made_(made), marching_(marching) {}
+    std::size_t marching_count() const { return marching_.size(); }
+    const Eigen::Vector3d& made(std::size_t v) const { return made_[v]; }
+    const Eigen::Vector3d& marching(std::size_t v) const { return marching_[v]; }
+    /// The mesher's vertices' boxes, filled by the caller.
+    std::vector<Eigen::Vector3d> lo, hi;
+    void box(std::size_t v, Eigen::Vector3d& l, Eigen::Vector3d& h) const {
+        if (v < marching_.size()) l = l.cwiseMin(made_[v]).cwiseMin(marching_[v]), h = h.cwiseMax(made_[v]).cwiseMax(marching_[v]);
+        else l = l.cwiseMin(lo[v - marching_.size()]), h = h.cwiseMax(hi[v - marching_.size()]);
+    }
+    void box(const std::array<std::int32_t, 3>& t, Eigen::Vector3d& l, Eigen::Vector3d& h) const {
+        l = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), h = -l;
+        for (const auto v : t) box(std::size_t(v), l, h);
+    }
+
+private:
+    const std::vector<Eigen::Vector3d>& made_;
+    const std::vector<Eigen::Vector3d>& marching_;
+};
+
+/// cell_bound()'s answer for a triangle that may leave its cell.
+constexpr std::uint64_t kFree = ~std::uint64_t(0);
+
+/// A triangle's cell (its key) when it lies in one cell of the grid wherever its corners go, each corner on a grid
+/// edge or inside the cell; kFree when not. Such a triangle is one of marching cubes' whose corners were moved along
+/// their grid edges, or not at all. Two such triangles in different cells meet only on the plane between the cells,
+/// where each holds only what its corners on the cells' common grid edges span: a point, or a chord of the common
+/// face. Marching cubes puts one vertex on a grid edge and never joins two of a face's crossings across the face,
+/// so the chords of two cells share their ends or lie apart: the triangles touch at a corner or not at all, and
+/// need no test (FeatureMesher.MarchingCubesTrianglesOfDifferentCellsNeverCross... in snap_test checks this).
+/// Within one cell they can cross once their corners slide. The cell is the one holding the centre of marching
+/// cubes' triangle, so that it is marching cubes' own.
+std::uint64_t cell_bound(const Reach& reach, const std::array<std::int32_t, 3>& t, const SparseVoxmap& voxmap) {
+    constexpr double kOn = 1e-5; // index units: round-off of a point put on a grid edge
+    Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low, sum = Eigen::Vector3d::Zero();
+    for (const auto corner : t) {
+        const auto v = std::size_t(corner);
+        if (v >= reach.marching_count()) return kFree;
+        const Eigen::Vector3d p = voxmap.index_of(reach.made(v)), q = voxmap.index_of(reach.marching(v));
+        if (p != q) { // moved: along one grid edge only
+            int along = 0;
+            for (int a = 0; a < 3; ++a) {
+                const double r = std::round(q[a]);
+                if (std::abs(p[a] - r) > kOn || std::abs(q[a] - r) > kOn) ++along;
+            }
+            if (along > 1) return kFree;
+        }
+        low = low.cwiseMin(p).cwiseMin(q), high = high.cwiseMax(p).cwiseMax(q), sum += q;
+    }
+    Index3 c;
+    for (int a = 0; a < 3; ++a) {
+        c[std::size_t(a)] = std::int64_t(std::floor(sum[a] / 3));
+        if (low[a] < double(c[std::size_t(a)]) - kOn || high[a] > double(c[std::size_t(a)]) + 1 + kOn) return kFree;
+    }
+    return cell_key(c);
+}
+
+/// Pairs of triangles, in the lists where threads found them (joining the lists into one took a tenth of the pass).
+using Pairs = std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>;
+
+/// Pairs of triangles that may cross while their corners move within `reach`, one of them marked in `some`: two
+/// triangles in one cell (`cell`), or a free triangle (kFree: a fan's, a split's, one with a corner moved off its
+/// grid edge, one unfolded) and another whose box meets its box. Marching cubes writes a cell's triangles one after
+/// another, and the mesher keeps the order of those it does not replace, so one cell's are found in one run of
+/// the triangles that are not free. Free triangles are filed by the cells of side `side` their boxes cover, and a
+/// pair is reported by the cell holding the low corner of the two boxes' overlap only. Filing every triangle by
+/// the cells of its box, as at first, took 0.17 s a call on the bunny ear edit at 256, for pairs in different cells
+/// that cannot cross.
+Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<std::uint64_t>& cell,
+                           const std::vector<std::uint8_t>& some, double side) {
     const std::size_t nt = triangles.size();
-    std::vector<Eigen::Vector3d> box_lo(nt), box_hi(nt);
-    tbb::parallel_for(std::size_t(0), nt, [&](std::size_t t) {
-        const auto& f = triangles[t];
-        box_lo[t] = lo[std::size_t(f[0])].cwiseMin(lo[std::size_t(f[1])]).cwiseMin(lo[std::size_t(f[2])]);
-        box_hi[t] = hi[std::size_t(f[0])].cwiseMax(hi[std::size_t(f[1])]).cwiseMax(hi[std::size_t(f[2])]);
-    });
+    tbb::enumerable_thread_specific<std::vector<std::pair<std::uint32_t, std::uint32_t>>> found;
+    const std::vector<std::uint32_t> loose = select_in_parallel(nt, [&](std::size_t t) { return cell[t] == kFree; });
+    std::vector<Eigen::Vector3d> loose_lo(loose.size()), loose_hi(loose.size());
+    tbb::parallel_for(std::size_t(0), loose.size(), [&](std::size_t i) { reach.box(triangles[loose[i]], loose_lo[i], loose_hi[i]); });
     Eigen::Vector3d origin = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
-    for (const auto& p : box_lo) origin = origin.cwiseMin(p);
+    for (const auto& p : loose_lo) origin = origin.cwiseMin(p);
     auto cell_of = [&](const Eigen::Vector3d& p) {
-        const Eigen::Vector3d q = (p - origin) / cell;
+        const Eigen::Vector3d q = ((p - origin) / side).cwiseMax(0.0);
         return std::array<std::uint64_t, 3>{std::uint64_t(q.x()), std::uint64_t(q.y()), std::uint64_t(q.z())};
     };
     auto key = [](std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | y << 21 | z << 42; };
-    std::vector<std::size_t> first(nt + 1, 0);
-    for (std::size_t t = 0; t < nt; ++t) {
-        const auto a = cell_of(box_lo[t]), b = cell_of(box_hi[t]);
-        first[t + 1] = first[t] + (b[0] - a[0] + 1) * (b[1] - a[1] + 1) * (b[2] - a[2] + 1);
-    }
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> filed(first[nt]);
-    tbb::parallel_for(std::size_t(0), nt, [&](std::size_t t) {
-        const auto a = cell_of(box_lo[t]), b = cell_of(box_hi[t]);
-        std::size_t at = first[t];
+    auto for_each_cell = [&](const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const auto& f) {
+        const auto a = cell_of(lo), b = cell_of(hi);
         for (std::uint64_t z = a[2]; z <= b[2]; ++z)
             for (std::uint64_t y = a[1]; y <= b[1]; ++y)
-                for (std::uint64_t x = a[0]; x <= b[0]; ++x) filed[at++] = {key(x, y, z), std::uint32_t(t)};
+                for (std::uint64_t x = a[0]; x <= b[0]; ++x) f(key(x, y, z));
+    };
+    // (cell, place in loose), sorted.
+    std::vector<std::size_t> first(loose.size() + 1, 0);
+    for (std::size_t i = 0; i < loose.size(); ++i) {
+        std::size_t cells = 0;
+        for_each_cell(loose_lo[i], loose_hi[i], [&](std::uint64_t) { ++cells; });
+        first[i + 1] = first[i] + cells;
+    }
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> filed(first.back());
+    tbb::parallel_for(std::size_t(0), loose.size(), [&](std::size_t i) {
+        std::size_t at = first[i];
+        for_each_cell(loose_lo[i], loose_hi[i], [&](std::uint64_t k) { filed[at++] = {k, std::uint32_t(i)}; });
     });
     tbb::parallel_sort(filed.begin(), filed.end());
-    std::vector<std::size_t> runs; // where each cell's run starts, and the end
-    for (std::size_t i = 0; i < filed.size(); ++i)
-        if (i == 0 || filed[i].first != filed[i - 1].first) runs.push_back(i);
-    runs.push_back(filed.size());
-    tbb::enumerable_thread_specific<std::vector<std::pair<std::uint32_t, std::uint32_t>>> found;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, runs.size() - 1, 256), [&](const auto& range) {
+    auto meet = [](const Eigen::Vector3d& lo_a, const Eigen::Vector3d& hi_a, const Eigen::Vector3d& lo_b, const Eigen::Vector3d& hi_b) {
+        return !(lo_a.array() > hi_b.array()).any() && !(lo_b.array() > hi_a.array()).any();
+    };
+    // Which cells hold a free triangle, a bit each where they are not too many (a model filling a 512 voxmap: 2 MiB
+    // of bits; past 16 MiB, none, and every cell is looked up): most triangles have no free one near them, and are
+    // passed by at the cost of a bit.
+    const Eigen::Vector3d top = std::accumulate(loose_hi.begin(), loose_hi.end(), origin, [](const Eigen::Vector3d& m, const Eigen::Vector3d& p) { return m.cwiseMax(p); });
+    const auto last = cell_of(top);
+    const std::uint64_t nx = last[0] + 1, ny = last[1] + 1, nz = last[2] + 1;
+    std::vector<std::uint64_t> held;
+    if (!loose.empty() && nx * ny * nz <= (std::uint64_t(1) << 27)) {
+        held.assign((nx * ny * nz + 63) / 64, 0);
+        for (const auto& [k, i] : filed) {
+            const std::uint64_t bit = (k & 0x1fffff) + nx * ((k >> 21 & 0x1fffff) + ny * (k >> 42));
+            held[bit / 64] |= std::uint64_t(1) << (bit % 64);
+        }
+    }
+    auto may_hold = [&](std::uint64_t k) {
+        const std::uint64_t x = k & 0x1fffff, y = k >> 21 & 0x1fffff, z = k >> 42;
+        if (x >= nx || y >= ny || z >= nz) return false;
+        if (held.empty()) return true;
+        const std::uint64_t bit = x + nx * (y + ny * z);
+        return (held[bit / 64] >> (bit % 64) & 1) != 0;
+    };
+    // Free with free.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, filed.size(), 1024), [&](const auto& range) {
         auto& local = found.local();
-        for (std::size_t r = range.begin(); r != range.end(); ++r)
-            for (std::size_t i = runs[r]; i < runs[r + 1]; ++i)
-                for (std::size_t j = i + 1; j < runs[r + 1]; ++j) {
-                    const std::uint32_t a = filed[i].second, b = filed[j].second;
-                    if (!some[a] && !some[b]) continue;
-                    if ((box_lo[a].array() > box_hi[b].array()).any() || (box_lo[b].array() > box_hi[a].array()).any()) continue;
-                    const auto c = cell_of(box_lo[a].cwiseMax(box_lo[b]));
-                    if (key(c[0], c[1], c[2]) == filed[i].first) local.push_back({a, b});
-                }
+        for (std::size_t i = range.begin(); i != range.end(); ++i)
+            for (std::size_t j = i + 1; j < filed.size() && filed[j].first == filed[i].first; ++j) {
+                const std::uint32_t p = filed[i].second, q = filed[j].second, a = loose[p], b = loose[q];
+                if (!(some[a] || some[b]) || !meet(loose_lo[p], loose_hi[p], loose_lo[q], loose_hi[q])) continue;
+                const auto c = cell_of(loose_lo[p].cwiseMax(loose_lo[q]));
+                if (key(c[0], c[1], c[2]) == filed[i].first) local.push_back({a, b});
+            }
     });
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
-    for (const auto& local : found) pairs.insert(pairs.end(), local.begin(), local.end());
+    // The others with free ones, looked up from the others' side.
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, filed.empty() ? 0 : nt, 4096), [&](const auto& range) {
+        auto& local = found.local();
+        Eigen::Vector3d lo, hi;
+        for (std::size_t a = range.begin(); a != range.end(); ++a) {
+            if (cell[a] == kFree) continue;
+            reach.box(triangles[a], lo, hi);
+            if ((hi.array() < origin.array()).any()) continue;
+            for_each_cell(lo, hi, [&](std::uint64_t k) {
+                if (!may_hold(k)) return;
+                for (auto it = std::lower_bound(filed.begin(), filed.end(), std::pair(k, std::uint32_t(0))); it != filed.end() && it->first == k; ++it) {
+                    const std::uint32_t p = it->second, b = loose[p];
+                    if (!(some[a] || some[b]) || !meet(lo, hi, loose_lo[p], loose_hi[p])) continue;
+                    const auto c = cell_of(lo.cwiseMax(loose_lo[p]));
+                    if (key(c[0], c[1], c[2]) == k) local.push_back({std::uint32_t(a), b});
+                }
+            });
+        }
+    });
+    Pairs pairs;
+    for (auto& local : found) pairs.push_back(std::move(local));
     return pairs;
 }
 
-/// Among `pairs`, those with a triangle marked in `looked` that cross: their triangles, ascending.
+/// Those triangles that cross another with one of the two marked in `looked`, ascending: among `pairs`, and among
+/// the triangles of each cell (`cell`, in one run of the triangles that are not free, as pairs_that_may_cross says).
 std::vector<std::uint32_t> crossing_triangles(const std::vector<Eigen::Vector3d>& v, const std::vector<std::array<std::int32_t, 3>>& triangles,
-                                              const std::vector<std::pair<std::uint32_t, std::uint32_t>>& pairs, const std::vector<std::uint8_t>& looked,
-                                              double tiny) {
-    std::vector<std::uint8_t> crossing(pairs.size(), 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pairs.size(), 4096), [&](const auto& range) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) {
-            const auto [a, b] = pairs[i];
-            if (looked[a] || looked[b]) crossing[i] = cross(v, triangles[a], triangles[b], tiny);
+                                              const Pairs& pairs, const std::vector<std::uint64_t>& cell, const std::vector<std::uint8_t>& looked, double tiny) {
+    const std::size_t nt = triangles.size();
+    tbb::enumerable_thread_specific<std::vector<std::uint32_t>> found;
+    for (const auto& list : pairs)
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, list.size(), 4096), [&](const auto& range) {
+            auto& local = found.local();
+            for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                const auto [a, b] = list[i];
+                if ((looked[a] || looked[b]) && cross(v, triangles[a], triangles[b], tiny)) local.push_back(a), local.push_back(b);
+            }
+        });
+    // Each triangle with those after it in its cell's run (the free ones between do not end a run).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096), [&](const auto& range) {
+        auto& local = found.local();
+        for (std::size_t a = range.begin(); a != range.end(); ++a) {
+            if (cell[a] == kFree) continue;
+            for (std::size_t b = a + 1; b < nt && (cell[b] == cell[a] || cell[b] == kFree); ++b)
+                if (cell[b] == cell[a] && (looked[a] || looked[b]) && cross(v, triangles[a], triangles[b], tiny))
+                    local.push_back(std::uint32_t(a)), local.push_back(std::uint32_t(b));
         }
     });
     std::vector<std::uint32_t> out;
-    for (std::size_t i = 0; i < pairs.size(); ++i)
-        if (crossing[i]) out.push_back(pairs[i].first), out.push_back(pairs[i].second);
+    for (const auto& local : found) out.insert(out.end(), local.begin(), local.end());
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
     return out;
@@ -141,9 +261,10 @@ std::vector<std::uint32_t> crossing_triangles(const std::vector<Eigen::Vector3d>
 } // namespace
 
 std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const std::vector<std::array<std::int32_t, 3>>& triangles,
-                                   const std::vector<Eigen::Vector3d>& marching, const std::vector<std::array<std::int32_t, 3>>& splits, double voxel_size) {
-    const std::size_t n = vertices.size();
-    const double tiny = 1e-4 * voxel_size;
+                                   const std::vector<Eigen::Vector3d>& marching, const std::vector<std::array<std::int32_t, 3>>& splits,
+                                   const std::vector<std::uint32_t>& unfolded, const SparseVoxmap& voxmap) {
+    const std::size_t n = vertices.size(), nm = marching.size(), nt = triangles.size();
+    const double tiny = 1e-4 * voxmap.voxel_size();
     // A vertex of marching cubes that the mesher moved goes back towards its own place, a split towards the middle
     // of its edge (which undoes it), a fan's centre towards the middle of its loop: a quarter of the way the first
     // time it is on a crossing triangle, half the second, all the third. Most crossings are shallow (the 24-gon
@@ -152,49 +273,51 @@ std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const
     // checked as well.
     constexpr double kWay[] = {0.0, 0.25, 0.5, 1.0};
     const std::vector<Eigen::Vector3d> made = vertices;
-    std::vector<std::uint8_t> level(n, 0), mark(n, 1), split(n, 0); // level 3: back, or never moved
-    for (std::size_t v = 0; v < marching.size(); ++v) mark[v] = vertices[v] != marching[v], level[v] = mark[v] ? 0 : 3;
-    for (const auto& s : splits) split[std::size_t(s[0])] = 1;
-    std::vector<Eigen::Vector3d> loop_middle(n, Eigen::Vector3d::Zero()); // a fan centre's: its neighbours' mean
+    std::vector<std::uint8_t> level(n, 0), moved(n, 1), split(n - nm, 0); // level 3: back, or never moved
+    tbb::parallel_for(std::size_t(0), nm, [&](std::size_t v) { moved[v] = vertices[v] != marching[v], level[v] = moved[v] ? 0 : 3; });
+    for (const auto& s : splits) split[std::size_t(s[0]) - nm] = 1;
+    std::vector<Eigen::Vector3d> loop_middle(n - nm, Eigen::Vector3d::Zero()); // a fan centre's: its neighbours' mean
     {
-        std::vector<int> count(n, 0);
+        std::vector<int> count(n - nm, 0);
         for (const auto& t : triangles)
             for (int c = 0; c < 3; ++c) {
                 const auto v = std::size_t(t[std::size_t(c)]);
-                if (v < marching.size() || split[v]) continue;
-                for (int d = 1; d < 3; ++d) loop_middle[v] += made[std::size_t(t[std::size_t((c + d) % 3)])], ++count[v];
+                if (v < nm || split[v - nm]) continue;
+                for (int d = 1; d < 3; ++d) loop_middle[v - nm] += made[std::size_t(t[std::size_t((c + d) % 3)])], ++count[v - nm];
             }
-        for (std::size_t v = marching.size(); v < n; ++v)
-            if (count[v] > 0) loop_middle[v] /= count[v];
-            else if (!split[v]) level[v] = 3;
+        for (std::size_t i = 0; i < n - nm; ++i)
+            if (count[i] > 0) loop_middle[i] /= count[i];
+            else if (!split[i]) level[nm + i] = 3;
     }
-    // Each corner's box over every place it may take: from where the mesher put it to where it goes back (a
-    // split's edge's ends move too, in the order made). The pairs of triangles whose boxes meet, found once.
-    std::vector<Eigen::Vector3d> lo = made, hi = made;
-    for (std::size_t v = 0; v < n; ++v)
-        if (level[v] < 3 && !split[v]) {
-            const Eigen::Vector3d& to = v < marching.size() ? marching[v] : loop_middle[v];
-            lo[v] = lo[v].cwiseMin(to), hi[v] = hi[v].cwiseMax(to);
-        }
+    // The box of every place each vertex may take: from where the mesher put it to where it goes back (a split's
+    // edge's ends move too, in the order made).
+    Reach reach(made, marching);
+    reach.lo.assign(made.begin() + std::ptrdiff_t(nm), made.end()), reach.hi = reach.lo;
+    for (std::size_t i = 0; i < n - nm; ++i)
+        if (level[nm + i] < 3 && !split[i]) reach.lo[i] = reach.lo[i].cwiseMin(loop_middle[i]), reach.hi[i] = reach.hi[i].cwiseMax(loop_middle[i]);
     for (const auto& [m, a, b] : splits) {
-        const auto i = std::size_t(m);
-        lo[i] = lo[i].cwiseMin(lo[std::size_t(a)]).cwiseMin(lo[std::size_t(b)]), hi[i] = hi[i].cwiseMax(hi[std::size_t(a)]).cwiseMax(hi[std::size_t(b)]);
+        Eigen::Vector3d l = reach.lo[std::size_t(m) - nm], h = reach.hi[std::size_t(m) - nm];
+        reach.box(std::size_t(a), l, h), reach.box(std::size_t(b), l, h);
+        reach.lo[std::size_t(m) - nm] = l, reach.hi[std::size_t(m) - nm] = h;
     }
+    std::vector<std::uint64_t> cell(nt);
+    tbb::parallel_for(std::size_t(0), nt, [&](std::size_t f) { cell[f] = cell_bound(reach, triangles[f], voxmap); });
+    for (const std::uint32_t f : unfolded) cell[f] = kFree;
     auto with_a_corner_in = [&](const std::vector<std::uint8_t>& corners) {
-        std::vector<std::uint8_t> looked(triangles.size(), 0);
-        tbb::parallel_for(std::size_t(0), triangles.size(), [&](std::size_t f) {
+        std::vector<std::uint8_t> looked(nt, 0);
+        tbb::parallel_for(std::size_t(0), nt, [&](std::size_t f) {
             const auto& t = triangles[f];
             looked[f] = corners[std::size_t(t[0])] || corners[std::size_t(t[1])] || corners[std::size_t(t[2])];
         });
         return looked;
     };
-    std::vector<std::uint8_t> looked = with_a_corner_in(mark);
-    const std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs = meeting_boxes(lo, hi, triangles, looked, 2 * voxel_size);
+    std::vector<std::uint8_t> looked = with_a_corner_in(moved);
+    const Pairs pairs = pairs_that_may_cross(reach, triangles, cell, looked, 2 * voxmap.voxel_size());
     // Only triangles with a corner moved in the last pass can cross anew. What crosses with every corner back is
     // returned.
-    std::vector<std::uint8_t> suspect(triangles.size(), 0);
+    std::vector<std::uint8_t> suspect(nt, 0);
     for (int pass = 0; pass < 16; ++pass) {
-        const std::vector<std::uint32_t> crossing = crossing_triangles(vertices, triangles, pairs, looked, tiny);
+        const std::vector<std::uint32_t> crossing = crossing_triangles(vertices, triangles, pairs, cell, looked, tiny);
         std::vector<std::uint8_t> back(n, 0);
         bool any = false;
         for (const std::uint32_t f : crossing) {
@@ -204,7 +327,7 @@ std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const
         }
         if (!any) break;
         for (std::size_t v = 0; v < n; ++v)
-            if (back[v] && !split[v]) vertices[v] = made[v] + kWay[level[v]] * ((v < marching.size() ? marching[v] : loop_middle[v]) - made[v]);
+            if (back[v] && (v < nm || !split[v - nm])) vertices[v] = made[v] + kWay[level[v]] * ((v < nm ? marching[v] : loop_middle[v - nm]) - made[v]);
         for (const auto& [m, a, b] : splits) { // in the order made: a split on a split's edge follows it
             const auto i = std::size_t(m);
             if (level[i] == 0) continue;
@@ -214,7 +337,7 @@ std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const
         looked = with_a_corner_in(back);
     }
     // What still crosses: among the triangles that crossed at some pass, those that cross now, and their partners.
-    return crossing_triangles(vertices, triangles, pairs, suspect, tiny);
+    return crossing_triangles(vertices, triangles, pairs, cell, suspect, tiny);
 }
 
 } // namespace voxwarp::extract_internal

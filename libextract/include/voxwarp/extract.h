@@ -9,7 +9,7 @@
 /// `feature_surface` (the input's surface around its sharp edges, e.g. sharp_feature_surface of the
 /// mesh voxelized, carried through a warp) the crossings and their normals are where each grid edge meets it;
 /// elsewhere the normals come from the density's gradient. Given `feature_surface`, sharp parts are looked for only
-/// near it (a smooth warp makes none the input lacks; in a deform this costs about 1.1-1.2 x marching cubes);
+/// near it (a smooth warp makes none the input lacks; in a deform this costs about 1.0-1.4 x marching cubes at 256);
 /// without it, everywhere. A last pass flips the edge of a triangle folded against its corners' normals where
 /// that unfolds it (most, not all). Away from sharp parts the output is marching cubes'.
 ///
