@@ -140,6 +140,7 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
     const std::size_t nt = triangles.size();
     tbb::enumerable_thread_specific<std::vector<std::pair<std::uint32_t, std::uint32_t>>> found;
     const std::vector<std::uint32_t> loose = select_in_parallel(nt, [&](std::size_t t) { return cell[t] == kFree; });
+    if (loose.empty()) return {};
     std::vector<Eigen::Vector3d> loose_lo(loose.size()), loose_hi(loose.size());
     tbb::parallel_for(std::size_t(0), loose.size(), [&](std::size_t i) { reach.box(triangles[loose[i]], loose_lo[i], loose_hi[i]); });
     Eigen::Vector3d origin = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
@@ -178,7 +179,7 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
     const auto last = cell_of(top);
     const std::uint64_t nx = last[0] + 1, ny = last[1] + 1, nz = last[2] + 1;
     std::vector<std::uint64_t> held;
-    if (!loose.empty() && nx * ny * nz <= (std::uint64_t(1) << 27)) {
+    if (nx * ny * nz <= (std::uint64_t(1) << 27)) {
         held.assign((nx * ny * nz + 63) / 64, 0);
         for (const auto& [k, i] : filed) {
             const std::uint64_t bit = (k & 0x1fffff) + nx * ((k >> 21 & 0x1fffff) + ny * (k >> 42));
@@ -204,7 +205,7 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
             }
     });
     // The others with free ones, looked up from the others' side.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, filed.empty() ? 0 : nt, 4096), [&](const auto& range) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096), [&](const auto& range) {
         auto& local = found.local();
         Eigen::Vector3d lo, hi;
         for (std::size_t a = range.begin(); a != range.end(); ++a) {
