@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <limits>
 #include <numeric>
+
 namespace voxwarp::extract_internal {
 
 namespace {
@@ -127,12 +128,11 @@ std::uint64_t cell_bound(const Reach& reach, const std::array<std::int32_t, 3>& 
 /// Pairs of triangles, in the lists where threads found them (joining the lists into one took a tenth of the pass).
 using Pairs = std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>;
 
-/// Pairs of triangles that may cross while their corners move within `reach`, one of them marked in `some`: two
-/// triangles in one cell (`cell`), or a free triangle (kFree: a fan's, a split's, one with a corner moved off its
-/// grid edge, one unfolded) and another whose box meets its box. Marching cubes writes a cell's triangles one after
-/// another, and the mesher keeps the order of those it does not replace, so one cell's are found in one run of
-/// the triangles that are not free. Free triangles are filed by the cells of side `side` their boxes cover, and a
-/// pair is reported by the cell holding the low corner of the two boxes' overlap only. Filing every triangle by
+/// Pairs of triangles that may cross while their corners move within `reach`, one of them marked in `some`, other
+/// than two of one cell (crossing_triangles() walks those): a free triangle (kFree in `cell`: a fan's, a split's,
+/// one with a corner moved off its grid edge, one unfolded) and another whose box meets its box. Free triangles are
+/// filed by the cells of side `side` their boxes cover, and a pair is reported by the cell holding the low corner
+/// of the two boxes' overlap only. Filing every triangle by
 /// the cells of its box, as at first, took 0.17 s a call on the bunny ear edit at 256, for pairs in different cells
 /// that cannot cross.
 Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<std::uint64_t>& cell,
@@ -169,8 +169,12 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
         for_each_cell(loose_lo[i], loose_hi[i], [&](std::uint64_t k) { filed[at++] = {k, std::uint32_t(i)}; });
     });
     tbb::parallel_sort(filed.begin(), filed.end());
-    auto meet = [](const Eigen::Vector3d& lo_a, const Eigen::Vector3d& hi_a, const Eigen::Vector3d& lo_b, const Eigen::Vector3d& hi_b) {
-        return !(lo_a.array() > hi_b.array()).any() && !(lo_b.array() > hi_a.array()).any();
+    // Whether triangle a (box lo, hi) and the p-th free one are a pair, reported in cell k: one of them marked, their
+    // boxes meeting, and k holding the low corner of the overlap.
+    auto reported = [&](std::uint32_t a, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, std::uint32_t p, std::uint64_t k) {
+        if (!(some[a] || some[loose[p]]) || (lo.array() > loose_hi[p].array()).any() || (loose_lo[p].array() > hi.array()).any()) return false;
+        const auto c = cell_of(lo.cwiseMax(loose_lo[p]));
+        return key(c[0], c[1], c[2]) == k;
     };
     // Which cells hold a free triangle, a bit each where they are not too many (a model filling a 512 voxmap: 2 MiB
     // of bits; past 16 MiB, none, and every cell is looked up): most triangles have no free one near them, and are
@@ -198,10 +202,8 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
         auto& local = found.local();
         for (std::size_t i = range.begin(); i != range.end(); ++i)
             for (std::size_t j = i + 1; j < filed.size() && filed[j].first == filed[i].first; ++j) {
-                const std::uint32_t p = filed[i].second, q = filed[j].second, a = loose[p], b = loose[q];
-                if (!(some[a] || some[b]) || !meet(loose_lo[p], loose_hi[p], loose_lo[q], loose_hi[q])) continue;
-                const auto c = cell_of(loose_lo[p].cwiseMax(loose_lo[q]));
-                if (key(c[0], c[1], c[2]) == filed[i].first) local.push_back({a, b});
+                const std::uint32_t p = filed[i].second, q = filed[j].second;
+                if (reported(loose[p], loose_lo[p], loose_hi[p], q, filed[i].first)) local.push_back({loose[p], loose[q]});
             }
     });
     // The others with free ones, looked up from the others' side.
@@ -215,10 +217,7 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
             for_each_cell(lo, hi, [&](std::uint64_t k) {
                 if (!may_hold(k)) return;
                 for (auto it = std::lower_bound(filed.begin(), filed.end(), std::pair(k, std::uint32_t(0))); it != filed.end() && it->first == k; ++it) {
-                    const std::uint32_t p = it->second, b = loose[p];
-                    if (!(some[a] || some[b]) || !meet(lo, hi, loose_lo[p], loose_hi[p])) continue;
-                    const auto c = cell_of(lo.cwiseMax(loose_lo[p]));
-                    if (key(c[0], c[1], c[2]) == k) local.push_back({std::uint32_t(a), b});
+                    if (reported(std::uint32_t(a), lo, hi, it->second, k)) local.push_back({std::uint32_t(a), loose[it->second]});
                 }
             });
         }
