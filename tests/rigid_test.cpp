@@ -137,7 +137,10 @@ TEST(Rigid, TwoFrameHandlesBendAndTwistTheBox) {
     // A lattice whose cells are about as wide as long across the bar: a frame fixes the map's Jacobian at its point
     // and holds the end face flat around it, and the finer 9 x 9 x 9 lattice lets the end faces' corners drift
     // (bend mean 0.98, max 3.9 voxels).
-    for (const Case& c : {Case{"bend", bend, "[0, 0, 1]", {0.4, 2.0, 0.008}}, Case{"twist", twist, "[1, 0, 0]", {0.35, 2.0, 0.002}}}) {
+    // The twist's volume bound is 0.3 %: since snapping puts the box's edges back where marching cubes rounds
+    // them (refinement's crease points across a rim), the output holds the lattice map's own small gain in volume
+    // (+0.14 % before, +0.20 % after, every distance to the exact twist the same or less).
+    for (const Case& c : {Case{"bend", bend, "[0, 0, 1]", {0.4, 2.0, 0.008}}, Case{"twist", twist, "[1, 0, 0]", {0.35, 2.0, 0.003}}}) {
         SCOPED_TRACE(c.name);
         const std::string edit = R"({"lattice": {"size": [9, 5, 5]}, "edits": [{"solver": "rigid", "constraints": [{"frame": [-2, 0, 0]}, {"frame": )" +
                                  json_point(end) + R"(, "to": )" + json_point(c.map(end)) + R"(, "rotate": {"axis": )" + c.axis + R"(, "degrees": 90}}]}]})";

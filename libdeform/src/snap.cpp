@@ -675,10 +675,11 @@ using Corner = std::int32_t;
 
 /// The pieces of triangle (v0, v1, v2) whose edges (v0 v1), (v1 v2), (v2 v0) are split where `split[k]`, as
 /// corners, in the triangle's own orientation: 1, 2, 3 or 4 of them. `middle` gives a split edge's corner and
-/// `length2` the squared length of a diagonal (the shorter one cuts a four-sided piece).
+/// `length2` the squared length of a diagonal (the shorter one cuts a four-sided piece, the longer with
+/// `other_diagonal`).
 template <class Middle, class Length2>
 void pieces(const std::array<std::int32_t, 3>& v, const std::array<bool, 3>& split, Middle middle, Length2 length2,
-            std::vector<std::array<Corner, 3>>& out) {
+            std::vector<std::array<Corner, 3>>& out, bool other_diagonal = false) {
     const int count = int(split[0]) + int(split[1]) + int(split[2]);
     if (count == 0) {
         out.push_back(v);
@@ -694,7 +695,7 @@ void pieces(const std::array<std::int32_t, 3>& v, const std::array<bool, 3>& spl
         const Corner a = v[std::size_t(k)], b = v[std::size_t((k + 1) % 3)], c = v[std::size_t((k + 2) % 3)];
         const Corner bc = middle((k + 1) % 3), ca = middle((k + 2) % 3);
         out.push_back({bc, c, ca});
-        if (length2(a, bc) <= length2(b, ca)) out.insert(out.end(), {{a, b, bc}, {a, bc, ca}});
+        if ((length2(a, bc) <= length2(b, ca)) != other_diagonal) out.insert(out.end(), {{a, b, bc}, {a, bc, ca}});
         else out.insert(out.end(), {{a, b, ca}, {b, bc, ca}});
     }
 }
@@ -1394,10 +1395,11 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         const std::vector<std::int32_t>& partner = first.partner;
         // An edge whose ends' sources lie on faces at an angle may leave the surface at its middle; where the
         // middle of the two sources lies within half the tolerance of either face's plane, it does not. Thin parts
-        // (another sheet within 1.5 voxels) are left alone: a new vertex there has no partner to keep it apart.
+        // (another sheet within 1.5 voxels) are left alone, a new vertex there having no partner to keep it apart,
+        // except on the input's crease itself (below).
         auto creased = [&](std::int32_t a, std::int32_t b) {
             const SourcePoint &sa = sources[std::size_t(a)], &sb = sources[std::size_t(b)];
-            if (sa.face < 0 || sb.face < 0 || sa.face == sb.face || partner[std::size_t(a)] >= 0 || partner[std::size_t(b)] >= 0) return false;
+            if (sa.face < 0 || sb.face < 0 || sa.face == sb.face) return false;
             const Eigen::Vector3d pa = surface.position(sa), pb = surface.position(sb), m = 0.5 * (pa + pb);
             return std::min(std::abs((m - pa).dot(surface.normal[std::size_t(sa.face)])), std::abs((m - pb).dot(surface.normal[std::size_t(sb.face)]))) > 0.5 * chord;
         };
@@ -1411,6 +1413,9 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
             Eigen::Vector3d at; ///< the exact image of the source point
             std::array<Eigen::Vector3d, 2> normal; ///< the exact surface's normal there, on either side of a crease
             SourcePoint source;
+            /// On the crease, across a thin part's rim or farther than max_move: judged by the exact normals and
+            /// tested for crossings (below).
+            bool rim = false;
         };
         constexpr std::size_t kBlock = 1536;
         const std::size_t blocks = (3 * F + kBlock - 1) / kBlock;
@@ -1425,17 +1430,23 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                     const Eigen::Vector3d pa = surface.position(sa), pb = surface.position(sb);
                     SourcePoint s;
                     std::int32_t other = -1; // the face across the crease
+                    const bool thin = partner[std::size_t(a)] >= 0 || partner[std::size_t(b)] >= 0;
                     if (const auto on_crease = crease_point(surface, sa.face, sb.face, pa, pb)) {
                         s = *on_crease, other = sb.face;
+                    } else if (thin) {
+                        continue;
                     } else {
                         s = surface.nearest(0.5 * (pa + pb), surface.normal[std::size_t(sa.face)] + surface.normal[std::size_t(sb.face)], reach, hint, near);
                         if (s.face < 0) continue;
                     }
                     const Eigen::Vector3d from = surface.position(s), x = push_forward(steps, from);
                     const double d = (x - 0.5 * (P[std::size_t(a)] + P[std::size_t(b)])).norm();
-                    if (!(d > chord && d <= max_move)) continue;
+                    // A thin part's rim (the bunny's ear, stretched by its edit: a ridge of 60 degrees) is cut up to
+                    // a voxel and more under its crease, whose point is then the only sound place for the vertex.
+                    const bool rim = other >= 0 && (thin || d > max_move);
+                    if (!(d > chord && d <= (rim ? kCornerReach * h : max_move))) continue;
                     const Eigen::Vector3d& n = surface.normal[std::size_t(s.face)];
-                    found[block].push_back({key(a, b), x, push_normals<2>(steps, from, {n, other < 0 ? n : surface.normal[std::size_t(other)]}), s});
+                    found[block].push_back({key(a, b), x, push_normals<2>(steps, from, {n, other < 0 ? n : surface.normal[std::size_t(other)]}), s, rim});
                 }
             }
         });
@@ -1468,45 +1479,248 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         for (auto& c : cuts) cut.insert(cut.end(), c.begin(), c.end());
         auto position = [&](Corner c) -> const Eigen::Vector3d& { return c >= 0 ? P[std::size_t(c)] : splits[std::size_t(-c - 1)].at; };
         auto on = [&](std::int32_t i) { return i >= 0 && split[std::size_t(i)]; }; // a side's split, not undone
-        auto pieces_of = [&](const Cut& c, std::vector<std::array<Corner, 3>>& out) {
-            const auto& s = c.second;
+        // Per cut triangle with two sides split: whether its four-sided piece is cut along the longer diagonal.
+        std::vector<char> other_diagonal(cut.size(), 0);
+        auto pieces_of = [&](std::size_t c, std::vector<std::array<Corner, 3>>& out) {
+            const auto& s = cut[c].second;
             pieces(
-                T[std::size_t(c.first)], {on(s[0]), on(s[1]), on(s[2])}, [&](int k) { return Corner(-s[std::size_t(k)] - 1); },
-                [&](Corner a, Corner b) { return (position(a) - position(b)).squaredNorm(); }, out);
+                T[std::size_t(cut[c].first)], {on(s[0]), on(s[1]), on(s[2])}, [&](int k) { return Corner(-s[std::size_t(k)] - 1); },
+                [&](Corner a, Corner b) { return (position(a) - position(b)).squaredNorm(); }, out, other_diagonal[c]);
         };
-        // A triangle whose pieces would not all face its way (or the extracted normal at its corners) keeps its
-        // sides whole; that changes only its neighbours' pieces, so repeat until every cut triangle passes.
+        auto on_rim = [&](std::size_t c) {
+            return std::any_of(cut[c].second.begin(), cut[c].second.end(), [&](std::int32_t i) { return on(i) && splits[std::size_t(i)].rim; });
+        };
+        // Whether cut triangle c's pieces fold: turned over against it (or the extracted normal at its corners), or
+        // a split corner's piece against its exact normal on both sides of its crease. A rim's pieces stand on the
+        // crease's two faces, which may turn from the rounded triangle they replace by more than a right angle (the
+        // ear's ridge: 90-100 degrees): up to 120 degrees, the exact normals judging them.
+        auto folds_in = [&](std::size_t c, const std::vector<std::array<Corner, 3>>& parts) {
+            const auto& t = T[std::size_t(cut[c].first)];
+            const Eigen::Vector3d before = (P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])]);
+            const bool rim = on_rim(c);
+            return std::any_of(parts.begin(), parts.end(), [&](const auto& p) {
+                const Eigen::Vector3d after = (position(p[1]) - position(p[0])).cross(position(p[2]) - position(p[0]));
+                if (after.norm() < tiny) return true;
+                if (rim ? after.dot(before) <= -0.5 * after.norm() * before.norm() : after.dot(before) <= 0 || turns_from_corners(before, after, t, normal))
+                    return true;
+                for (auto k : p) { // and a split corner's exact normal, on one side of its crease at least
+                    if (k >= 0) continue;
+                    const auto& e = splits[std::size_t(-k - 1)].normal;
+                    if (after.dot(e[0]) <= 0 && after.dot(e[1]) <= 0) return true;
+                }
+                return false;
+            });
+        };
+        // Whether two pieces (or triangles) cross: a side of either through the other, sides sharing a corner with
+        // the other not counted.
+        auto cross = [&](const std::array<Corner, 3>& a, const std::array<Corner, 3>& b) {
+            auto side_through = [&](const std::array<Corner, 3>& u, const std::array<Corner, 3>& v) {
+                for (int k = 0; k < 3; ++k) {
+                    const Corner e0 = u[std::size_t(k)], e1 = u[std::size_t((k + 1) % 3)];
+                    if (std::find(v.begin(), v.end(), e0) != v.end() || std::find(v.begin(), v.end(), e1) != v.end()) continue;
+                    if (segment_meets(position(e0), position(e1), position(v[0]), position(v[1]), position(v[2]))) return true;
+                }
+                return false;
+            };
+            return side_through(a, b) || side_through(b, a);
+        };
+        std::vector<std::int32_t> cut_of; // per triangle: its index in cut, or -1 (made when a rim is split)
+        struct Box3 {
+            Eigen::Vector3d lo, hi;
+            bool meets(const Box3& o) const { return (lo.array() <= o.hi.array()).all() && (o.lo.array() <= hi.array()).all(); }
+        };
+        // A cut triangle's reach: its corners and every split point of its sides, put in or not.
+        auto reach_of = [&](std::size_t c) {
+            const auto& t = T[std::size_t(cut[c].first)];
+            Box3 b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
+            for (const auto v : t) b.lo = b.lo.cwiseMin(P[std::size_t(v)]), b.hi = b.hi.cwiseMax(P[std::size_t(v)]);
+            for (const auto i : cut[c].second)
+                if (i >= 0) b.lo = b.lo.cwiseMin(splits[std::size_t(i)].at), b.hi = b.hi.cwiseMax(splits[std::size_t(i)].at);
+            return b;
+        };
+        std::vector<char> tested_split; // the splits as the last crossing test found them (empty: none yet)
         for (;;) {
-            const std::vector<std::int32_t> whole = tbb::parallel_reduce(
-                tbb::blocked_range<std::size_t>(0, cut.size(), 1024), std::vector<std::int32_t>(),
-                [&](const auto& r, std::vector<std::int32_t> keep) {
-                    std::vector<std::array<Corner, 3>> parts;
-                    for (std::size_t c = r.begin(); c != r.end(); ++c) {
-                        const auto& t = T[std::size_t(cut[c].first)];
-                        const auto& s = cut[c].second;
-                        if (!on(s[0]) && !on(s[1]) && !on(s[2])) continue;
-                        const Eigen::Vector3d before = (P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])]);
-                        parts.clear();
-                        pieces_of(cut[c], parts);
-                        const bool folds = std::any_of(parts.begin(), parts.end(), [&](const auto& p) {
-                            const Eigen::Vector3d after = (position(p[1]) - position(p[0])).cross(position(p[2]) - position(p[0]));
-                            if (after.dot(before) <= 0 || after.norm() < tiny || turns_from_corners(before, after, t, normal)) return true;
-                            for (auto c : p) { // and a split corner's exact normal, on one side of its crease at least
-                                if (c >= 0) continue;
-                                const auto& n = splits[std::size_t(-c - 1)].normal;
-                                if (after.dot(n[0]) <= 0 && after.dot(n[1]) <= 0) return true;
+            // A triangle whose pieces would fold keeps its sides whole; that changes only its neighbours' pieces,
+            // so repeat until every cut triangle passes. A rim's triangle split on two sides tries the longer
+            // diagonal too: the shorter can leave a piece edge-on across the ridge.
+            for (;;) {
+                const std::vector<std::int32_t> whole = tbb::parallel_reduce(
+                    tbb::blocked_range<std::size_t>(0, cut.size(), 1024), std::vector<std::int32_t>(),
+                    [&](const auto& r, std::vector<std::int32_t> keep) {
+                        std::vector<std::array<Corner, 3>> parts;
+                        for (std::size_t c = r.begin(); c != r.end(); ++c) {
+                            const auto& s = cut[c].second;
+                            if (!on(s[0]) && !on(s[1]) && !on(s[2])) continue;
+                            bool folds = true;
+                            for (const char other : {0, 1}) {
+                                if (other && (int(on(s[0])) + int(on(s[1])) + int(on(s[2])) != 2 || !on_rim(c))) break;
+                                other_diagonal[c] = other;
+                                parts.clear();
+                                pieces_of(c, parts);
+                                if (!(folds = folds_in(c, parts))) break;
                             }
-                            return false;
-                        });
-                        if (folds)
-                            for (auto i : s)
-                                if (on(i)) keep.push_back(i);
+                            if (folds)
+                                for (auto i : s)
+                                    if (on(i)) keep.push_back(i);
+                        }
+                        return keep;
+                    },
+                    concat);
+                if (whole.empty()) break;
+                for (auto i : whole) split[std::size_t(i)] = 0;
+            }
+            // A rim's pieces reach up to 1.5 voxels off the output, where they may pass through its far sheet or a
+            // neighbour's pieces: each rim triangle's pieces against every triangle (cut ones by their pieces) whose
+            // box meets theirs, and a rim triangle with a crossing gives up its rim splits; until none crosses. The
+            // rims tested: all of them the first time, then those near a cut triangle whose splits changed since
+            // (given up for a crossing, or undone by the folds that followed), the only places where pieces moved.
+            std::vector<std::size_t> rims;
+            if (tested_split.empty()) {
+                for (std::size_t c = 0; c < cut.size(); ++c)
+                    if (on_rim(c)) rims.push_back(c);
+            } else {
+                std::vector<Box3> dirty;
+                for (std::size_t c = 0; c < cut.size(); ++c)
+                    if (std::any_of(cut[c].second.begin(), cut[c].second.end(), [&](std::int32_t i) { return i >= 0 && split[std::size_t(i)] != tested_split[std::size_t(i)]; })) {
+                        Box3 b = reach_of(c);
+                        b.lo.array() -= 2 * h, b.hi.array() += 2 * h;
+                        dirty.push_back(b);
                     }
-                    return keep;
+                for (std::size_t c = 0; c < cut.size(); ++c)
+                    if (on_rim(c)) {
+                        const Box3 b = reach_of(c);
+                        if (std::any_of(dirty.begin(), dirty.end(), [&](const Box3& d) { return d.meets(b); })) rims.push_back(c);
+                    }
+            }
+            if (rims.empty()) break;
+            tested_split = split;
+            if (cut_of.empty()) {
+                cut_of.assign(F, -1);
+                for (std::size_t c = 0; c < cut.size(); ++c) cut_of[std::size_t(cut[c].first)] = std::int32_t(c);
+            }
+            auto box_of = [&](const std::array<Corner, 3>& p) {
+                Box3 b{position(p[0]), position(p[0])};
+                for (const Corner k : p) b.lo = b.lo.cwiseMin(position(k)), b.hi = b.hi.cwiseMax(position(k));
+                return b;
+            };
+            // Cells a voxel wide over the rims' reach (grown by two voxels), numbered from its low corner: a box
+            // beyond the region meets none, one reaching out of it is clamped to its border cells.
+            Box3 region{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
+            for (const std::size_t c : rims) {
+                const Box3 b = reach_of(c);
+                region.lo = region.lo.cwiseMin(b.lo), region.hi = region.hi.cwiseMax(b.hi);
+            }
+            region.lo.array() -= 2 * h, region.hi.array() += 2 * h;
+            std::array<std::int64_t, 3> cells{};
+            for (int a = 0; a < 3; ++a) cells[std::size_t(a)] = std::int64_t(std::ceil((region.hi[a] - region.lo[a]) / h)) + 1;
+            auto cell = [&](const Eigen::Vector3d& x) {
+                std::array<std::int64_t, 3> c{};
+                for (int a = 0; a < 3; ++a)
+                    c[std::size_t(a)] = std::int64_t(std::clamp(std::floor((x[a] - region.lo[a]) / h), 0.0, double(cells[std::size_t(a)] - 1)));
+                return c;
+            };
+            auto cell_key = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::uint64_t(x + cells[0] * (y + cells[1] * z)); };
+            // Calls visit(key) for each cell of a box that meets the region, until it returns true.
+            auto each_cell = [&](const Box3& b, const auto& visit) {
+                if (!b.meets(region)) return false;
+                const auto lo = cell(b.lo), hi = cell(b.hi);
+                for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+                    for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+                        for (std::int64_t x = lo[0]; x <= hi[0]; ++x)
+                            if (visit(cell_key(x, y, z))) return true;
+                return false;
+            };
+            // The rims' pieces, filed under every cell their boxes reach; `reached`: those cells.
+            std::vector<std::array<Corner, 3>> rim_pieces;
+            std::vector<std::uint32_t> rim_of; // per rim piece: its rim (index into rims)
+            std::vector<std::pair<std::uint64_t, std::uint32_t>> filed; // (cell, rim piece)
+            std::vector<std::array<Corner, 3>> parts;
+            for (std::size_t q = 0; q < rims.size(); ++q) {
+                parts.clear();
+                pieces_of(rims[q], parts);
+                for (const auto& p : parts) {
+                    each_cell(box_of(p), [&](std::uint64_t k) { return filed.push_back({k, std::uint32_t(rim_pieces.size())}), false; });
+                    rim_pieces.push_back(p), rim_of.push_back(std::uint32_t(q));
+                }
+            }
+            tbb::parallel_sort(filed.begin(), filed.end());
+            std::vector<std::uint64_t> reached;
+            for (std::size_t e = 0; e < filed.size(); ++e)
+                if (e == 0 || filed[e].first != filed[e - 1].first) reached.push_back(filed[e].first);
+            // Most triangles lie far from every rim: a bitmap of the blocks of 4 x 4 x 4 cells the rims reach passes
+            // those over before their cells are looked up (at most 2^27 bits: beyond, every block counts).
+            const std::array<std::int64_t, 3> blocks{(cells[0] + 3) / 4, (cells[1] + 3) / 4, (cells[2] + 3) / 4};
+            const bool bitmap = double(blocks[0]) * double(blocks[1]) * double(blocks[2]) <= double(1 << 27);
+            std::vector<std::uint64_t> blocked(bitmap ? std::size_t(blocks[0] * blocks[1] * blocks[2] + 63) / 64 : 0, 0);
+            auto block_of = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return std::size_t(x / 4 + blocks[0] * (y / 4 + blocks[1] * (z / 4))); };
+            if (bitmap)
+                for (const std::uint64_t k : reached) {
+                    const std::int64_t key = std::int64_t(k);
+                    const std::size_t b = block_of(key % cells[0], key / cells[0] % cells[1], key / (cells[0] * cells[1]));
+                    blocked[b / 64] |= std::uint64_t(1) << (b % 64);
+                }
+            auto in_blocks = [&](const Box3& b) {
+                if (!b.meets(region)) return false;
+                if (!bitmap) return true;
+                const auto lo = cell(b.lo), hi = cell(b.hi);
+                for (std::int64_t z = lo[2] / 4; z <= hi[2] / 4; ++z)
+                    for (std::int64_t y = lo[1] / 4; y <= hi[1] / 4; ++y)
+                        for (std::int64_t x = lo[0] / 4; x <= hi[0] / 4; ++x) {
+                            const std::size_t q = std::size_t(x + blocks[0] * (y + blocks[1] * z));
+                            if (blocked[q / 64] >> (q % 64) & 1) return true;
+                        }
+                return false;
+            };
+            const std::vector<std::uint32_t> near = tbb::parallel_reduce(
+                tbb::blocked_range<std::size_t>(0, F, 4096), std::vector<std::uint32_t>(),
+                [&](const auto& r, std::vector<std::uint32_t> found) {
+                    for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                        const auto& t = T[f];
+                        Box3 b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
+                        for (const auto v : t) b.lo = b.lo.cwiseMin(P[std::size_t(v)]), b.hi = b.hi.cwiseMax(P[std::size_t(v)]);
+                        if (cut_of[f] >= 0)
+                            for (const auto i : cut[std::size_t(cut_of[f])].second)
+                                if (on(i)) b.lo = b.lo.cwiseMin(splits[std::size_t(i)].at), b.hi = b.hi.cwiseMax(splits[std::size_t(i)].at);
+                        if (in_blocks(b) && each_cell(b, [&](std::uint64_t k) { return std::binary_search(reached.begin(), reached.end(), k); }))
+                            found.push_back(std::uint32_t(f));
+                    }
+                    return found;
                 },
-                concat);
-            if (whole.empty()) break;
-            for (auto i : whole) split[std::size_t(i)] = 0;
+                [](std::vector<std::uint32_t> a, const std::vector<std::uint32_t>& b) { return a.insert(a.end(), b.begin(), b.end()), a; });
+            // Each near triangle's pieces (or itself) against the rims' pieces in the cells its box reaches.
+            std::vector<std::uint32_t> found_rims = tbb::parallel_reduce(
+                tbb::blocked_range<std::size_t>(0, near.size(), 64), std::vector<std::uint32_t>(),
+                [&](const auto& r, std::vector<std::uint32_t> found) {
+                    std::vector<std::array<Corner, 3>> mine;
+                    for (std::size_t q = r.begin(); q != r.end(); ++q) {
+                        const std::uint32_t f = near[q];
+                        mine.clear();
+                        if (cut_of[f] >= 0) pieces_of(std::size_t(cut_of[f]), mine);
+                        else mine.push_back(T[f]);
+                        for (const auto& o : mine) {
+                            const Box3 b = box_of(o);
+                            each_cell(b, [&](std::uint64_t k) {
+                                auto it = std::lower_bound(filed.begin(), filed.end(), std::pair<std::uint64_t, std::uint32_t>(k, 0));
+                                for (; it != filed.end() && it->first == k; ++it) {
+                                    const auto& p = rim_pieces[it->second];
+                                    const std::uint32_t rim = rim_of[it->second];
+                                    if (std::uint32_t(cut[rims[rim]].first) != f && b.meets(box_of(p)) && cross(p, o)) found.push_back(rim);
+                                }
+                                return false;
+                            });
+                        }
+                    }
+                    return found;
+                },
+                [](std::vector<std::uint32_t> a, const std::vector<std::uint32_t>& b) { return a.insert(a.end(), b.begin(), b.end()), a; });
+            std::sort(found_rims.begin(), found_rims.end());
+            found_rims.erase(std::unique(found_rims.begin(), found_rims.end()), found_rims.end());
+            std::vector<std::size_t> crossing;
+            for (const std::uint32_t q : found_rims) crossing.push_back(rims[q]);
+            if (crossing.empty()) break;
+            for (const std::size_t c : crossing)
+                for (const auto i : cut[c].second)
+                    if (on(i) && splits[std::size_t(i)].rim) split[std::size_t(i)] = 0;
         }
         // New vertices in edge order; each cut triangle's first piece in its place, the others at the end.
         std::vector<std::int32_t> id(splits.size(), -1);
@@ -1516,13 +1730,13 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         added += P.size() - n;
         output.triangles.reserve(F + 3 * (P.size() - n)); // a split edge adds a piece to each of its two triangles
         std::vector<std::array<Corner, 3>> parts;
-        for (const auto& c : cut) {
+        for (std::size_t c = 0; c < cut.size(); ++c) {
             parts.clear();
             pieces_of(c, parts);
             auto vertex = [&](Corner x) { return x >= 0 ? x : id[std::size_t(-x - 1)]; };
             for (std::size_t p = 0; p < parts.size(); ++p) {
                 const std::array<std::int32_t, 3> t{vertex(parts[p][0]), vertex(parts[p][1]), vertex(parts[p][2])};
-                if (p == 0) output.triangles[std::size_t(c.first)] = t;
+                if (p == 0) output.triangles[std::size_t(cut[c].first)] = t;
                 else output.triangles.push_back(t);
             }
         }
