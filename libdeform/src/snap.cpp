@@ -386,7 +386,8 @@ std::vector<std::int32_t> other_sheet(const std::vector<Eigen::Vector3d>& P, con
 }
 
 /// Joins the lists of a parallel_reduce.
-std::vector<std::int32_t> concat(std::vector<std::int32_t> a, const std::vector<std::int32_t>& b) {
+template <class T>
+std::vector<T> concat(std::vector<T> a, const std::vector<T>& b) {
     a.insert(a.end(), b.begin(), b.end());
     return a;
 }
@@ -621,7 +622,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
                 }
                 return found;
             },
-            concat);
+            concat<std::int32_t>);
         // A vertex stays on its side of the other sheet's tangent plane, at least a third of the gap extracted or a
         // twentieth of a voxel from it, wherever both end up: both sides of a thin wall or gap snap onto the input's
         // two sides (the scan's shell at 64: walls a voxel thick all over), but one that snaps alone, or onto the
@@ -642,7 +643,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
                 }
                 return found;
             },
-            concat);
+            concat<std::int32_t>);
         put_back.insert(put_back.end(), crossing.begin(), crossing.end());
         if (put_back.empty()) break;
         changed.assign(n, 0);
@@ -758,12 +759,14 @@ bool segment_meets(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eig
 
 /// Whether triangles a and b (vertex indices into P) cross: a side of either passes through the other, sides that
 /// share a corner with the other not counted (they meet there).
-bool triangles_cross(const std::vector<Eigen::Vector3d>& P, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b) {
+/// `at(i)`: the position of corner i.
+template <class At>
+bool triangles_cross(const At& at, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b) {
     auto side_through = [&](const std::array<std::int32_t, 3>& s, const std::array<std::int32_t, 3>& t) {
         for (int k = 0; k < 3; ++k) {
             const std::int32_t e0 = s[std::size_t(k)], e1 = s[std::size_t((k + 1) % 3)];
             if (std::find(t.begin(), t.end(), e0) != t.end() || std::find(t.begin(), t.end(), e1) != t.end()) continue;
-            if (segment_meets(P[std::size_t(e0)], P[std::size_t(e1)], P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])])) return true;
+            if (segment_meets(at(e0), at(e1), at(t[0]), at(t[1]), at(t[2]))) return true;
         }
         return false;
     };
@@ -1333,7 +1336,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             const bool crosses = boxes.any_meeting(lo, hi, [&](std::size_t b) {
                 for (const auto& piece : pieces)
                     for (std::size_t q = put_from[b]; q < put_from[b + 1]; ++q)
-                        if (triangles_cross(P, piece, put[q])) return true;
+                        if (triangles_cross([&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; }, piece, put[q])) return true;
                 return false;
             });
             if (crosses) {
@@ -1511,29 +1514,19 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 return false;
             });
         };
-        // Whether two pieces (or triangles) cross: a side of either through the other, sides sharing a corner with
-        // the other not counted.
-        auto cross = [&](const std::array<Corner, 3>& a, const std::array<Corner, 3>& b) {
-            auto side_through = [&](const std::array<Corner, 3>& u, const std::array<Corner, 3>& v) {
-                for (int k = 0; k < 3; ++k) {
-                    const Corner e0 = u[std::size_t(k)], e1 = u[std::size_t((k + 1) % 3)];
-                    if (std::find(v.begin(), v.end(), e0) != v.end() || std::find(v.begin(), v.end(), e1) != v.end()) continue;
-                    if (segment_meets(position(e0), position(e1), position(v[0]), position(v[1]), position(v[2]))) return true;
-                }
-                return false;
-            };
-            return side_through(a, b) || side_through(b, a);
-        };
         std::vector<std::int32_t> cut_of; // per triangle: its index in cut, or -1 (made when a rim is split)
         struct Box3 {
             Eigen::Vector3d lo, hi;
             bool meets(const Box3& o) const { return (lo.array() <= o.hi.array()).all() && (o.lo.array() <= hi.array()).all(); }
         };
         // A cut triangle's reach: its corners and every split point of its sides, put in or not.
+        auto box_of = [&](const std::array<Corner, 3>& p) {
+            Box3 b{position(p[0]), position(p[0])};
+            for (const Corner k : p) b.lo = b.lo.cwiseMin(position(k)), b.hi = b.hi.cwiseMax(position(k));
+            return b;
+        };
         auto reach_of = [&](std::size_t c) {
-            const auto& t = T[std::size_t(cut[c].first)];
-            Box3 b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
-            for (const auto v : t) b.lo = b.lo.cwiseMin(P[std::size_t(v)]), b.hi = b.hi.cwiseMax(P[std::size_t(v)]);
+            Box3 b = box_of(T[std::size_t(cut[c].first)]);
             for (const auto i : cut[c].second)
                 if (i >= 0) b.lo = b.lo.cwiseMin(splits[std::size_t(i)].at), b.hi = b.hi.cwiseMax(splits[std::size_t(i)].at);
             return b;
@@ -1565,7 +1558,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                         }
                         return keep;
                     },
-                    concat);
+                    concat<std::int32_t>);
                 if (whole.empty()) break;
                 for (auto i : whole) split[std::size_t(i)] = 0;
             }
@@ -1598,11 +1591,6 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 cut_of.assign(F, -1);
                 for (std::size_t c = 0; c < cut.size(); ++c) cut_of[std::size_t(cut[c].first)] = std::int32_t(c);
             }
-            auto box_of = [&](const std::array<Corner, 3>& p) {
-                Box3 b{position(p[0]), position(p[0])};
-                for (const Corner k : p) b.lo = b.lo.cwiseMin(position(k)), b.hi = b.hi.cwiseMax(position(k));
-                return b;
-            };
             // Cells a voxel wide over the rims' reach (grown by two voxels), numbered from its low corner: a box
             // beyond the region meets none, one reaching out of it is clamped to its border cells.
             Box3 region{Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), Eigen::Vector3d::Constant(-std::numeric_limits<double>::infinity())};
@@ -1675,18 +1663,13 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 tbb::blocked_range<std::size_t>(0, F, 4096), std::vector<std::uint32_t>(),
                 [&](const auto& r, std::vector<std::uint32_t> found) {
                     for (std::size_t f = r.begin(); f != r.end(); ++f) {
-                        const auto& t = T[f];
-                        Box3 b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
-                        for (const auto v : t) b.lo = b.lo.cwiseMin(P[std::size_t(v)]), b.hi = b.hi.cwiseMax(P[std::size_t(v)]);
-                        if (cut_of[f] >= 0)
-                            for (const auto i : cut[std::size_t(cut_of[f])].second)
-                                if (on(i)) b.lo = b.lo.cwiseMin(splits[std::size_t(i)].at), b.hi = b.hi.cwiseMax(splits[std::size_t(i)].at);
+                        const Box3 b = cut_of[f] >= 0 ? reach_of(std::size_t(cut_of[f])) : box_of(T[f]);
                         if (in_blocks(b) && each_cell(b, [&](std::uint64_t k) { return std::binary_search(reached.begin(), reached.end(), k); }))
                             found.push_back(std::uint32_t(f));
                     }
                     return found;
                 },
-                [](std::vector<std::uint32_t> a, const std::vector<std::uint32_t>& b) { return a.insert(a.end(), b.begin(), b.end()), a; });
+                concat<std::uint32_t>);
             // Each near triangle's pieces (or itself) against the rims' pieces in the cells its box reaches.
             std::vector<std::uint32_t> found_rims = tbb::parallel_reduce(
                 tbb::blocked_range<std::size_t>(0, near.size(), 64), std::vector<std::uint32_t>(),
@@ -1704,7 +1687,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                                 for (; it != filed.end() && it->first == k; ++it) {
                                     const auto& p = rim_pieces[it->second];
                                     const std::uint32_t rim = rim_of[it->second];
-                                    if (std::uint32_t(cut[rims[rim]].first) != f && b.meets(box_of(p)) && cross(p, o)) found.push_back(rim);
+                                    if (std::uint32_t(cut[rims[rim]].first) != f && b.meets(box_of(p)) && triangles_cross(position, p, o)) found.push_back(rim);
                                 }
                                 return false;
                             });
@@ -1712,7 +1695,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                     }
                     return found;
                 },
-                [](std::vector<std::uint32_t> a, const std::vector<std::uint32_t>& b) { return a.insert(a.end(), b.begin(), b.end()), a; });
+                concat<std::uint32_t>);
             std::sort(found_rims.begin(), found_rims.end());
             found_rims.erase(std::unique(found_rims.begin(), found_rims.end()), found_rims.end());
             std::vector<std::size_t> crossing;
