@@ -674,7 +674,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
     // face put back tries again alone, in order, against its faces and pairs as they now stand (the bunny ear's
     // rim: a vertex half a voxel from its image stayed there, 0.53 voxel under the exact warp). Not those the pair
     // check put back: letting them try too gave the feature mesher's output more crossings (the scan's 327 -> 365).
-    {
+    if (std::find(tried.begin(), tried.end(), 1) != tried.end()) {
         const Adjacency faces_of(n, [&](auto visit) {
             for (std::size_t f = 0; f < checks.size(); ++f)
                 for (auto i : checks[f]) visit(std::size_t(i), std::uint32_t(f));
@@ -1299,13 +1299,14 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             for (int k = 1; k < 3; ++k)
                 if (w[k] < w[least]) least = k;
             const bool on_side = w[least] < kCornerSide;
-            std::array<std::optional<Insert>, 4> tries{on_side ? split_side(f, least) : split_inside(f), on_side ? split_inside(f) : split_side(f, least),
-                                                       split_side(f, (least + 1) % 3), split_side(f, (least + 2) % 3)};
-            for (auto& in : tries)
+            for (int attempt = 0; attempt < 4; ++attempt) { // each built only when the ones before it fold
+                const bool inside = attempt == (on_side ? 1 : 0);
+                std::optional<Insert> in = inside ? split_inside(f) : split_side(f, attempt < 2 ? least : (least + attempt - 1) % 3);
                 if (in && sound(*in)) {
                     in->source = point.source;
                     return in;
                 }
+            }
             return std::nullopt;
         };
         if (auto in = first_sound(nearest, weights)) return in;
@@ -1321,8 +1322,10 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             Eigen::Vector3d b;
             if (const double d = distance_to(f, b); f != nearest && d <= farthest) farther.push_back({d, f, b});
         });
-        std::sort(farther.begin(), farther.end(), [](const Near& a, const Near& b) { return a.distance < b.distance || (a.distance == b.distance && a.f < b.f); });
-        for (std::size_t i = 0; i < std::min(farther.size(), kFartherTriangles); ++i)
+        const std::size_t candidates = std::min(farther.size(), kFartherTriangles);
+        std::partial_sort(farther.begin(), farther.begin() + std::ptrdiff_t(candidates), farther.end(),
+                          [](const Near& a, const Near& b) { return a.distance < b.distance || (a.distance == b.distance && a.f < b.f); });
+        for (std::size_t i = 0; i < candidates; ++i)
             if (auto in = first_sound(farther[i].f, farther[i].weights)) return in;
         return std::nullopt;
     };
@@ -1518,7 +1521,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                     // extracted normals at their corners, from two sheets a voxel apart, say little (the fold rules of
                     // the thick parts gave the scan at 128 p99 0.226 voxel against the exact warp, these 0.194).
                     const bool rim = thin || (other >= 0 && d > max_move);
-                    if (!(d > chord && d <= (other >= 0 ? (rim ? kCornerReach * h : max_move) : max_move))) continue;
+                    if (!(d > chord && d <= (other >= 0 && rim ? kCornerReach * h : max_move))) continue;
                     const Eigen::Vector3d& n = surface.normal[std::size_t(s.face)];
                     found[block].push_back({key(a, b), x, push_normals<2>(steps, from, {n, other < 0 ? n : surface.normal[std::size_t(other)]}), s, rim});
                 }

@@ -108,11 +108,10 @@ struct RefineOptions {
 /// source point (where the two faces share an edge, the point of that edge nearest the output edge, so the pieces
 /// lie on the faces; otherwise the source of the ends' sources' middle) when the middle misses that by more than
 /// chord_voxels, unless that is more than max_move_voxels or a piece would fold. Triangles split 1 to 2, 3 or 4 by
-/// their split edges, so the mesh stays closed and its topology is kept. Thin parts (another sheet within 1.5
-/// voxels) are left alone, but for the crease point itself: where an edge crosses a thin part's rim, or misses its
-/// crease point by more than max_move_voxels (a sharp ridge the voxmap rounds off), that point goes in up to 1.5
-/// voxels away, its pieces judged by the crease's exact normals (turning up to 120 degrees from the triangle they
-/// replace) and given up where they would cross the output.
+/// their split edges, so the mesh stays closed and its topology is kept. In thin parts (another sheet within 1.5
+/// voxels), and where an edge misses its crease point by more than max_move_voxels (a sharp ridge the voxmap rounds
+/// off; that point then goes in up to 1.5 voxels away), the pieces are judged by the exact normals (turning up to
+/// 120 degrees from the triangle they replace) and given up where they would cross the output.
 /// Then where the input's corners and creases lie (vertices whose faces' normals spread by over 10 degrees, and
 /// points half a voxel apart along edges whose faces meet at over 10 degrees, on faces at least half a voxel
 /// long), the output's triangles still cut under them: each such point whose exact image lies more than
