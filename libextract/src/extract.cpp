@@ -68,7 +68,8 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
     progress.report(0.0);
     if (options.adaptivity == 0 && !options.quads) {
         TriangleMesh mesh = extract_internal::marching_cubes(voxmap, float(options.isovalue), progress);
-        return options.mesher == Mesher::features ? extract_internal::restore_features(std::move(mesh), voxmap, options) : mesh;
+        if (options.mesher == Mesher::features) return extract_internal::restore_features(std::move(mesh), voxmap, options);
+        return mesh; // moved, with its spare capacity (a conditional expression would copy it)
     }
     openvdb::initialize();
     // Meshed in index space, the points (32-bit floats) then put in the world as doubles: a world-space grid would

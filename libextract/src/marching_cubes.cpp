@@ -250,10 +250,11 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
         block.first_triangle = triangles, triangles += block.triangles;
     }
     TriangleMesh mesh;
-    // Room for the feature mesher's fan centres, split points and their triangles (a few percent), so that adding
-    // them copies nothing (capacity never written is address space; its pages are never touched).
-    mesh.vertices.reserve(std::size_t(vertices + vertices / 8));
-    mesh.triangles.reserve(std::size_t(triangles + triangles / 8));
+    // Room for the feature mesher's fan centres, split points and their triangles (a few percent), and for the
+    // vertices and pieces snapping's refinement adds (15-30 %), so that adding them copies nothing (capacity never
+    // written is address space; its pages are never touched).
+    mesh.vertices.reserve(std::size_t(vertices + vertices / 2));
+    mesh.triangles.reserve(std::size_t(triangles + triangles / 2));
     mesh.vertices.resize(std::size_t(vertices));
     mesh.triangles.resize(std::size_t(triangles));
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 4), [&](const auto& range) {

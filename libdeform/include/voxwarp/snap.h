@@ -124,7 +124,8 @@ std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& so
                               const SnapOptions& options, const RefineOptions& refine = {});
 
 /// snap_to_sources, then refine_to_sources with what snapping found out about the output's sheets (the deform's
-/// path: refinement then costs its splits alone).
+/// path: refinement then costs its splits alone). Empty `sources` are found first (find_sources), the output's
+/// vertex normals worked out once for both.
 SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps, std::vector<SourcePoint>& sources,
                            const SnapOptions& options, const RefineOptions& refine = {});
 
