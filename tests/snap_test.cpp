@@ -253,6 +253,35 @@ TEST(Snap, RefinementPutsEdgesAcrossTheInputsCreasesOnTheSurface) {
     EXPECT_FALSE(self_intersects(refined));
 }
 
+TEST(Snap, SnapAndRefineFindsTheSourcesWhenGivenNone) {
+    // The deform's path: snap_and_refine given no sources finds them itself (the vertex normals worked out once for
+    // both). It must give what find_sources and then snap_and_refine give, bit for bit, through a warp.
+    const TriangleMesh box = test::box_mesh({-1, -0.6, -0.4}, {1, 0.6, 0.4}, 1);
+    VoxelizeOptions vo;
+    vo.resolution = 40;
+    WarpDomain domain = make_domain(voxelize_sparse(box, vo), LatticeSpec{});
+    Lattice moved = domain.lattice;
+    for (auto& p : moved.points()) p += Eigen::Vector3d(0, 0, 0.15 * p.x() * p.x());
+    const std::vector<WarpStep> steps = {{domain.lattice, moved}};
+    const SnapOptions so{.voxel_size = domain.voxmap.voxel_size()};
+    const SourceSurface surface(box);
+    TriangleMesh given = extract(warp(domain, moved)), found = given;
+    std::vector<SourcePoint> given_sources = find_sources(given, surface, steps, so), found_sources;
+    const SnapReport a = snap_and_refine(given, surface, steps, given_sources, so);
+    const SnapReport b = snap_and_refine(found, surface, steps, found_sources, so);
+    EXPECT_GT(a.refined, 0u);
+    EXPECT_EQ(a.snapped, b.snapped);
+    EXPECT_EQ(a.unsnapped, b.unsnapped);
+    EXPECT_EQ(a.refined, b.refined);
+    ASSERT_EQ(given.vertices.size(), found.vertices.size());
+    ASSERT_EQ(found_sources.size(), found.vertices.size());
+    EXPECT_EQ(given.triangles, found.triangles);
+    for (std::size_t v = 0; v < given.vertices.size(); ++v) {
+        ASSERT_EQ(given.vertices[v], found.vertices[v]) << "vertex " << v;
+        ASSERT_EQ(given_sources[v].face, found_sources[v].face) << "vertex " << v;
+    }
+}
+
 TEST(Snap, BunnyRoundTripMeetsItsAccuracyGoal) {
     // The goal for the bundled bunny (1839 vertices, so an output edge crosses a crease every few voxels)
     // at 128: mean <= 0.005 and p99 <= 0.05 voxel both ways (0.0099 and 0.111 with vertices alone on the surface).
