@@ -936,36 +936,36 @@ public:
         // Cells of middles start at 0 (origin_ is the least corner); rows run along x, one per (y, z). The items
         // are counted into their rows, then each row sorted: no key per item, and no sort of the whole (a fifth
         // of the index's memory, and a quarter of its time).
-        struct Extent {
-            double widest = 0;
-            std::int64_t y = 0, z = 0;
-        };
+        using Rows = std::array<std::int64_t, 2>; // the last row's y and z
         const std::size_t F = T.size();
-        const Extent extent = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, F, 4096), Extent{},
-            [&](const auto& r, Extent e) {
+        const Rows last = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, F, 4096), Rows{0, 0},
+            [&](const auto& r, Rows e) {
                 for (std::size_t f = r.begin(); f != r.end(); ++f) {
-                    const auto [k, i] = filed(output, f);
-                    e.widest = std::max(e.widest, double(i.r)), e.y = std::max(e.y, std::int64_t(k >> 21 & kMask)), e.z = std::max(e.z, std::int64_t(k >> 42));
+                    const std::uint64_t k = key(middle(output, f));
+                    e[0] = std::max(e[0], std::int64_t(k >> 21 & kMask)), e[1] = std::max(e[1], std::int64_t(k >> 42));
                 }
                 return e;
             },
-            [](const Extent& a, const Extent& b) { return Extent{std::max(a.widest, b.widest), std::max(a.y, b.y), std::max(a.z, b.z)}; });
-        radius_ = extent.widest, rows_y_ = extent.y + 1, rows_z_ = extent.z + 1;
+            [](const Rows& a, const Rows& b) { return Rows{std::max(a[0], b[0]), std::max(a[1], b[1])}; });
+        rows_y_ = last[0] + 1, rows_z_ = last[1] + 1;
         row_start_.assign(std::size_t(rows_y_ * rows_z_ + 1), 0);
         for (std::size_t f = 0; f < F; ++f) ++row_start_[std::size_t(row_of(key(middle(output, f)))) + 1];
         for (std::size_t r = 1; r < row_start_.size(); ++r) row_start_[r] += row_start_[r - 1];
         items_.resize(F);
-        {
-            std::vector<std::atomic<std::uint32_t>> next(row_start_.size() - 1);
-            for (std::size_t r = 0; r + 1 < row_start_.size(); ++r) next[r].store(row_start_[r], std::memory_order_relaxed);
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, F, 4096), [&](const auto& r) {
+        std::vector<std::atomic<std::uint32_t>> next(row_start_.size() - 1);
+        for (std::size_t r = 0; r + 1 < row_start_.size(); ++r) next[r].store(row_start_[r], std::memory_order_relaxed);
+        radius_ = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, F, 4096), 0.0,
+            [&](const auto& r, double widest) {
                 for (std::size_t f = r.begin(); f != r.end(); ++f) {
                     const auto [k, i] = filed(output, f);
                     items_[next[std::size_t(row_of(k))].fetch_add(1, std::memory_order_relaxed)] = i;
+                    widest = std::max(widest, double(i.r));
                 }
-            });
-        }
+                return widest;
+            },
+            [](double a, double b) { return std::max(a, b); });
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, row_start_.size() - 1, 64), [&](const auto& r) {
             for (std::size_t row = r.begin(); row != r.end(); ++row) std::sort(items_.begin() + row_start_[row], items_.begin() + row_start_[row + 1]);
         });
@@ -1875,7 +1875,6 @@ SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, con
     Sheets sheets;
     std::vector<Eigen::Vector3d> normal;
     if (sources.empty() && !output.vertices.empty()) {
-        check_options(options);
         normal = vertex_normals(output);
         sources = find_sources(output, input, steps, options, normal);
     }
