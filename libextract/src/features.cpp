@@ -7,6 +7,7 @@
 
 #include <voxwarp_internal/geometry.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include <tbb/parallel_for.h>
@@ -405,6 +406,41 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         std::vector<std::int32_t> cycle;      // its boundary, empty when the patch is not one disk or the point strays
         Eigen::Vector3d point = Eigen::Vector3d::Zero();
     };
+    // A fan whose centre lies on a sharp edge but past part of its loop along the edge folds the triangles there
+    // over, flat in the face's plane (turned cubes: 0.13 % of the triangles faced against the cube's normal). The
+    // centre slides along the edge, which keeps it on the edge: how each fan triangle faces is linear in the slide,
+    // so the slides for which every triangle faces along its outer corners' normals form an interval. The centre
+    // takes the slide nearest none, a quarter of the interval inside its ends; with no such slide it stays.
+    auto slid_along_edge = [&](const Eigen::Vector3d& point, const std::vector<std::int32_t>& cycle) {
+        Eigen::Matrix3d spread = Eigen::Matrix3d::Zero();
+        for (const auto v : cycle)
+            if (const Eigen::Vector3d& m = normals[std::size_t(v)]; !m.isZero()) spread += m.normalized() * m.normalized().transpose();
+        // Along the edge: the direction all the normals leave free, when they span a plane and no more.
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> spread_of(spread);
+        const Eigen::Vector3d& lambda = spread_of.eigenvalues(); // ascending
+        if (!(lambda[1] > 0.05 * lambda[2] && lambda[0] < 0.1 * lambda[1])) return point;
+        const Eigen::Vector3d d = spread_of.eigenvectors().col(0);
+        double lo_t = -std::numeric_limits<double>::infinity(), hi_t = std::numeric_limits<double>::infinity();
+        bool folds = false;
+        for (std::size_t k = 0; k < cycle.size(); ++k) {
+            const auto a = std::size_t(cycle[k]), b = std::size_t(cycle[(k + 1) % cycle.size()]);
+            const Eigen::Vector3d m = normals[a] + normals[b];
+            if (m.isZero()) continue;
+            const Eigen::Vector3d pa = mesh.vertices[a] - point, pb = mesh.vertices[b] - point;
+            // ((pa - t d) x (pb - t d)) . m = c + e t
+            const double c = pa.cross(pb).dot(m), e = -(d.cross(pb) + pa.cross(d)).dot(m);
+            folds |= !(c > 0);
+            if (e > 0) lo_t = std::max(lo_t, -c / e);
+            else if (e < 0) hi_t = std::min(hi_t, -c / e);
+            else if (!(c > 0)) return point;
+        }
+        if (!folds || !(lo_t < hi_t)) return point;
+        // A quarter of the interval inside either end, or a twentieth of a voxel past its one end.
+        const double inside = std::isfinite(hi_t - lo_t) ? 0.25 * (hi_t - lo_t) : 0.05 * h;
+        const double t = std::isfinite(lo_t) ? (std::isfinite(hi_t) ? std::clamp(0.0, lo_t + inside, hi_t - inside) : std::max(0.0, lo_t + inside))
+                                             : std::min(0.0, hi_t - inside);
+        return Eigen::Vector3d(point + t * d);
+    };
     std::vector<const std::vector<int>*> patch_list;
     for (const auto& [r, members] : patches) patch_list.push_back(&members);
     std::vector<Fan> fans(patch_list.size());
@@ -458,6 +494,11 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         const double slack = first.rank == 3 ? 1.0 : grid ? 0.8 : 0.05;
         const Eigen::Vector3d q = voxmap.index_of(point);
         if (((q - lo).array() < -slack).any() || ((q - hi).array() > slack).any()) return;
+        if (first.rank == 2 && members.size() == 1)
+            if (const Eigen::Vector3d slid = slid_along_edge(point, cycle); slid.allFinite()) {
+                const Eigen::Vector3d r = voxmap.index_of(slid);
+                if (((r - lo).array() >= -slack).all() && ((r - hi).array() <= slack).all()) point = slid;
+            }
         fan.cycle = std::move(cycle);
         fan.point = point;
     });
