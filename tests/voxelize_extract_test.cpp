@@ -507,10 +507,10 @@ TEST(RoundTrip, TurnedCubesKeepTheirEdgesAndCorners) {
     }
     std::printf("%zu turned cubes: output vertices within %.3f voxel of the cube, its edges within %.3f voxel of the output; %zu of %zu triangles face "
                 "against the cube (marching cubes: %zu)\n", cases.size(), worst_vertex, worst_edge, against, triangles, against_mc);
-    // In-plane folds, which shading shows: 92 before fans on an edge slid along it to where none of their triangles
-    // folds (80 of them at the edges), 12 since, all on the faces (marching cubes' vertices moved onto the face
-    // apart from their neighbours along the grid).
-    EXPECT_LE(against, 20u);
+    // In-plane folds, which shading shows. 93 before fans on an edge slid along it to where none of their triangles
+    // folds (80 of them at the edges); 12 after that, on the faces three voxels from the edges, where marching
+    // cubes' vertices were drawn sideways onto the feature surface's rim; none since they are not.
+    EXPECT_EQ(against, 0u);
 }
 
 TEST(RoundTrip, PolyhedraKeepTheirEdges) {
@@ -568,6 +568,8 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
             const Figures s = figures(sharp), m = figures(mc);
             const std::size_t against = facing_against(sharp, input, h);
             facing += against;
+            // Where the voxmap keeps the shape (no concave notch filled, no tip lost), none.
+            if (name == "hexagonal prism" || name == "24-gon prism" || name == "octahedron") EXPECT_EQ(against, 0u);
             std::printf("%s, turn %d: features: edges mean %.4f max %.3f, vertices within %.3f, %zu triangles facing against the shape; marching cubes: %.4f, "
                         "%.3f, %.3f voxels, %zu\n", name.c_str(), trial, s.edge_mean, s.edge_max, s.vertex_max, against, m.edge_mean, m.edge_max, m.vertex_max,
                         facing_against(mc, input, h));
@@ -585,10 +587,11 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
                 EXPECT_LE(s.edge_max, 0.15);
             }
         }
-    // 134 before fans on an edge slid along it (the octahedron's first turn alone 22), 42 since; marching cubes' own
-    // are at the acute tips, which voxelizing loses.
+    // 134 before fans on an edge slid along it (the octahedron's first turn alone 22), 42 after, 17 since vertices
+    // on a face are not drawn sideways onto the feature surface's rim: 8 at the L block's notch, 9 at the acute
+    // tips, where marching cubes has 25 of its own.
     std::printf("polyhedra: %zu triangles facing against their shape\n", facing);
-    EXPECT_LE(facing, 80u);
+    EXPECT_LE(facing, 34u);
 }
 
 // Random densities put ambiguous faces and cubes everywhere, inside voxels on the border, and values exactly at

@@ -252,9 +252,14 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                 mesh.vertices[i] = a + t * (b - a);
                 normals[i] = n;
                 e.t = t;
-            } else if (grid->nearest(mesh.vertices[i], voxmap, 0.6 * h, x, n) && n.dot(normals[i]) > 0) {
+            } else if (grid->nearest(mesh.vertices[i], voxmap, 0.6 * h, x, n) && n.dot(normals[i]) > 0 &&
+                       std::abs((x - mesh.vertices[i]).dot(n)) >= 0.5 * (x - mesh.vertices[i]).norm()) {
                 // The density put a crossing on a grid edge the surface misses (resampled by a warp, it rounds sharp
-                // parts a little): the vertex goes to the surface, off its grid edge.
+                // parts a little): the vertex goes to the surface, off its grid edge. Not along the surface: a
+                // vertex on a flat face beyond the feature surface's rim (three voxels from the sharp edges) would
+                // be drawn sideways onto the rim, apart from its neighbours, and fold their triangles over in the
+                // face's plane (turned cubes: 12 triangles facing against the cube), where marching cubes' own
+                // crossing is exact. A vertex on a rounded edge goes to it across both faces, at 45 degrees or more.
                 mesh.vertices[i] = x;
                 normals[i] = n;
             }
