@@ -63,6 +63,9 @@ public:
     /// edge, is no reason to split); with the edge's direction there. False when there is none.
     bool nearest(const Eigen::Vector3d& a, const Eigen::Vector3d& b, double margin, Eigen::Vector3d& point, Eigen::Vector3d& direction) const {
         const Eigen::Vector3d qa = voxmap_.index_of(a), qb = voxmap_.index_of(b);
+        // A mesh edge spans a voxel or two. One with an end that is not a number, or gone far off, would have this
+        // walk cells without end (a fan's centre slid by an infinite amount once hung the snowden edit here).
+        if (!(qa.allFinite() && qb.allFinite()) || ((qa - qb).cwiseAbs().array() > 64).any()) return false;
         const Index3 lo = cell_containing(qa.cwiseMin(qb)), hi = cell_containing(qa.cwiseMax(qb));
         if (!cells_.any(lo, hi)) return false;
         double best = reach_;
