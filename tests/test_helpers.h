@@ -6,6 +6,7 @@
 #include <voxwarp/edit_file.h>
 #include <voxwarp/mesh_io.h>
 #include <voxwarp/triangle_mesh.h>
+#include <voxwarp_internal/geometry.h>
 
 #include <cmath>
 #include <functional>
@@ -211,27 +212,6 @@ inline DeformedAndExact deform_with_exact_warp(const std::string& mesh, const st
     return r;
 }
 
-/// The point of triangle (a, b, c) nearest p: by the Voronoi region of p's projection (a corner, an edge, the inside).
-inline Eigen::Vector3d nearest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-    const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-    if (d1 <= 0 && d2 <= 0) return a;
-    const Eigen::Vector3d bp = p - b;
-    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-    if (d3 >= 0 && d4 <= d3) return b;
-    const double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + d1 / (d1 - d3) * ab;
-    const Eigen::Vector3d cp = p - c;
-    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-    if (d6 >= 0 && d5 <= d6) return c;
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + d2 / (d2 - d6) * ac;
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
-    const double denominator = va + vb + vc;
-    return a + ab * (vb / denominator) + ac * (vc / denominator);
-}
-
 /// Output triangles that face against the input's surface: against the normal of every input face within half a
 /// voxel of their centre (of the nearest face where none is that near), so that a triangle on a sharp edge may
 /// face along either side. An in-plane fold faces straight against its face. Triangles under a millionth of a
@@ -249,7 +229,7 @@ inline std::size_t facing_against(const TriangleMesh& out, const TriangleMesh& i
         bool along_nearest = false;
         for (const auto& f : input.triangles) {
             const Eigen::Vector3d &p = input.vertices[std::size_t(f[0])], &q = input.vertices[std::size_t(f[1])], &r = input.vertices[std::size_t(f[2])];
-            const double d = (nearest_on_triangle(centre, p, q, r) - centre).norm();
+            const double d = (internal::closest_on_triangle(centre, p, q, r) - centre).norm();
             const bool along = n.dot((q - p).cross(r - p)) > 0;
             if (d <= 0.5 * h) near_any = true, along_any |= along;
             if (d < nearest) nearest = d, along_nearest = along;

@@ -521,7 +521,9 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
             const std::size_t against = test::facing_against(sharp, input, h);
             facing += against;
             // Where the voxmap keeps the shape (no concave notch filled, no tip lost), none.
-            if (name == "hexagonal prism" || name == "24-gon prism" || name == "octahedron") EXPECT_EQ(against, 0u);
+            if (name == "hexagonal prism" || name == "24-gon prism" || name == "octahedron") {
+                EXPECT_EQ(against, 0u);
+            }
             std::printf("%s, turn %d: features: edges mean %.4f max %.3f, vertices within %.3f, %zu triangles facing against the shape; marching cubes: %.4f, "
                         "%.3f, %.3f voxels, %zu\n", name.c_str(), trial, s.edge_mean, s.edge_max, s.vertex_max, against, m.edge_mean, m.edge_max, m.vertex_max,
                         test::facing_against(mc, input, h));

@@ -81,7 +81,7 @@ public:
                         const auto& [lo, hi] = boxes_[t];
                         if ((p.cwiseMax(lo).cwiseMin(hi) - p).squaredNorm() >= best * best) continue;
                         const auto& f = surface_.triangles[t];
-                        const Eigen::Vector3d x = closest_on_triangle(p, surface_.vertices[std::size_t(f[0])], surface_.vertices[std::size_t(f[1])], surface_.vertices[std::size_t(f[2])]);
+                        const Eigen::Vector3d x = internal::closest_on_triangle(p, surface_.vertices[std::size_t(f[0])], surface_.vertices[std::size_t(f[1])], surface_.vertices[std::size_t(f[2])]);
                         const double d = (x - p).norm();
                         if (d < best) {
                             best = d, point = x, found = true;
@@ -93,26 +93,6 @@ public:
     }
 
 private:
-    /// Ericson's closest point on triangle abc to p.
-    static Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-        const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-        const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-        if (d1 <= 0 && d2 <= 0) return a;
-        const Eigen::Vector3d bp = p - b;
-        const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-        if (d3 >= 0 && d4 <= d3) return b;
-        const double vc = d1 * d4 - d3 * d2;
-        if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
-        const Eigen::Vector3d cp = p - c;
-        const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-        if (d6 >= 0 && d5 <= d6) return c;
-        const double vb = d5 * d2 - d1 * d6;
-        if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
-        const double va = d3 * d6 - d5 * d4;
-        if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-        const double denom = 1.0 / (va + vb + vc);
-        return a + ab * (vb * denom) + ac * (vc * denom);
-    }
     const TriangleMesh& surface_;
     CellBuckets cells_;
     CoarseMarks near_; ///< the cells within one of a triangle's
