@@ -936,19 +936,11 @@ public:
         // Cells of middles start at 0 (origin_ is the least corner); rows run along x, one per (y, z). The items
         // are counted into their rows, then each row sorted: no key per item, and no sort of the whole (a fifth
         // of the index's memory, and a quarter of its time).
-        using Rows = std::array<std::int64_t, 2>; // the last row's y and z
+        // Middles lie in the vertices' box: its top corner's cell, and one more for rounding, bounds the rows.
+        const std::uint64_t top = key(top_corner);
         const std::size_t F = T.size();
-        const Rows last = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, F, 4096), Rows{0, 0},
-            [&](const auto& r, Rows e) {
-                for (std::size_t f = r.begin(); f != r.end(); ++f) {
-                    const std::uint64_t k = key(middle(output, f));
-                    e[0] = std::max(e[0], std::int64_t(k >> 21 & kMask)), e[1] = std::max(e[1], std::int64_t(k >> 42));
-                }
-                return e;
-            },
-            [](const Rows& a, const Rows& b) { return Rows{std::max(a[0], b[0]), std::max(a[1], b[1])}; });
-        rows_y_ = last[0] + 1, rows_z_ = last[1] + 1;
+        rows_y_ = std::min(std::int64_t(top >> 21 & kMask) + 1, std::int64_t(kMask)) + 1;
+        rows_z_ = std::min(std::int64_t(top >> 42) + 1, std::int64_t(kMask)) + 1;
         row_start_.assign(std::size_t(rows_y_ * rows_z_ + 1), 0);
         for (std::size_t f = 0; f < F; ++f) ++row_start_[std::size_t(row_of(key(middle(output, f)))) + 1];
         for (std::size_t r = 1; r < row_start_.size(); ++r) row_start_[r] += row_start_[r - 1];
