@@ -26,6 +26,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 namespace voxwarp {
 
@@ -493,11 +494,38 @@ std::vector<SourcePoint> find_sources(const TriangleMesh& output, const SourceSu
 
 namespace {
 
+/// Whether the segment p-q passes through triangle abc.
+bool segment_meets(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const double u = internal::line_meets_triangle(p, q - p, a, b, c);
+    return u >= 0 && u <= 1;
+}
+
+/// Whether triangles a and b (vertex indices into P) cross: a side of either passes through the other, sides that
+/// share a corner with the other not counted (they meet there).
+/// `at(i)`: the position of corner i.
+template <class At>
+bool triangles_cross(const At& at, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b) {
+    auto side_through = [&](const std::array<std::int32_t, 3>& s, const std::array<std::int32_t, 3>& t) {
+        for (int k = 0; k < 3; ++k) {
+            const std::int32_t e0 = s[std::size_t(k)], e1 = s[std::size_t((k + 1) % 3)];
+            if (std::find(t.begin(), t.end(), e0) != t.end() || std::find(t.begin(), t.end(), e1) != t.end()) continue;
+            if (segment_meets(at(e0), at(e1), at(t[0]), at(t[1]), at(t[2]))) return true;
+        }
+        return false;
+    };
+    return side_through(a, b) || side_through(b, a);
+}
+
 /// Voxels: the least a snapped vertex keeps from the other sheet's plane, and the gap under which sheets count as
 /// touching (snap).
 constexpr double kSheetMargin = 0.05;
 /// How far (in max_move) an exact image may lie for its vertex to move part of the way toward it (snap).
 constexpr double kPartReach = 2;
+/// The cosine of the angle from a corner's extracted normal past which a snapped triangle is tested for crossing
+/// those around it (snap, refinement), and how deep (voxels) two must pass through each other's planes to count as
+/// crossing (snap).
+constexpr double kSteep = 0.7071;
+constexpr double kCrossDepth = 1e-4;
 
 /// A compressed adjacency: start[k] .. start[k + 1] index the items of key k. `each(visit)` calls visit(key, item)
 /// for every pair, the same pairs in the same order each time it is called.
@@ -520,6 +548,12 @@ struct Adjacency {
 bool turns_from_corners(const Eigen::Vector3d& before, const Eigen::Vector3d& after, const std::array<std::int32_t, 3>& t,
                         const std::vector<Eigen::Vector3d>& normal) {
     return std::any_of(t.begin(), t.end(), [&](std::int32_t i) { return after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0; });
+}
+
+/// Whether a face with normal `n` (unnormalized) turns further than kSteep from the extracted normal at one of its
+/// corners `t`: where a snapped or split face may pass through one a few triangles away.
+bool steep_at_corners(const Eigen::Vector3d& n, const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& normal) {
+    return std::any_of(t.begin(), t.end(), [&](std::int32_t i) { return n.dot(normal[std::size_t(i)]) < kSteep * n.norm() * normal[std::size_t(i)].norm(); });
 }
 
 /// What snapping finds out about the output as extracted, which refinement's first round needs again.
@@ -646,56 +680,65 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
         const double before = (P[v] - P[u]).dot(m), after = (at(std::int32_t(v)) - at(std::int32_t(u))).dot(m);
         return (before < 0 ? -after : after) < std::min(std::abs(before) / 3, touching);
     };
-    std::vector<char> changed, tried(n, 0);
-    for (;;) {
-        std::vector<std::int32_t> put_back = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::int32_t>(),
-            [&](const auto& r, std::vector<std::int32_t> found) {
-                for (std::size_t f = r.begin(); f != r.end(); ++f) {
-                    const auto& t = checks[f];
-                    if (!changed.empty() && !changed[std::size_t(t[0])] && !changed[std::size_t(t[1])] && !changed[std::size_t(t[2])]) continue;
-                    if (!fails(t)) continue;
-                    // An anchor carries the user's target: its face's other snapped corners go back first.
-                    const bool others = std::any_of(t.begin(), t.end(), [&](auto i) { return snapped[std::size_t(i)] && !anchored[std::size_t(i)]; });
-                    for (auto i : t)
-                        if (snapped[std::size_t(i)] && !(others && anchored[std::size_t(i)])) found.push_back(i);
-                }
-                return found;
-            },
-            concat<std::int32_t>);
-        // A vertex stays on its side of the other sheet's tangent plane, at least a third of the gap extracted or a
-        // twentieth of a voxel from it, wherever both end up: both sides of a thin wall or gap snap onto the input's
-        // two sides (the scan's shell at 64: walls a voxel thick all over), but one that snaps alone, or onto the
-        // wrong side, could cross the other. An anchor's pull is along its tip, where the sheets meet: the fold
-        // checks alone judge it.
-        const std::vector<std::int32_t> crossing = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, n, 4096), std::vector<std::int32_t>(),
-            [&](const auto& r, std::vector<std::int32_t> found) {
-                for (std::size_t v = r.begin(); v != r.end(); ++v) {
-                    const std::int32_t u = partner[v];
-                    if (u < 0 || (!changed.empty() && !changed[v] && !changed[std::size_t(u)]) || !pair_crosses(v, std::size_t(u))) continue;
-                    for (const std::size_t i : {v, std::size_t(u)})
-                        if (snapped[i]) found.push_back(std::int32_t(i));
-                }
-                return found;
-            },
-            concat<std::int32_t>);
-        for (auto i : put_back) tried[std::size_t(i)] = 1;
-        for (auto i : crossing) tried[std::size_t(i)] = 0;
-        put_back.insert(put_back.end(), crossing.begin(), crossing.end());
-        if (put_back.empty()) break;
-        changed.assign(n, 0);
-        for (auto i : put_back) snapped[std::size_t(i)] = 0, changed[std::size_t(i)] = 1;
-    }
+    std::vector<char> tried(n, 0);
+    auto settle = [&](std::vector<char> changed) {
+        for (;;) {
+            std::vector<std::int32_t> put_back = tbb::parallel_reduce(
+                tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::int32_t>(),
+                [&](const auto& r, std::vector<std::int32_t> found) {
+                    for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                        const auto& t = checks[f];
+                        if (!changed.empty() && !changed[std::size_t(t[0])] && !changed[std::size_t(t[1])] && !changed[std::size_t(t[2])]) continue;
+                        if (!fails(t)) continue;
+                        // An anchor carries the user's target: its face's other snapped corners go back first.
+                        const bool others = std::any_of(t.begin(), t.end(), [&](auto i) { return snapped[std::size_t(i)] && !anchored[std::size_t(i)]; });
+                        for (auto i : t)
+                            if (snapped[std::size_t(i)] && !(others && anchored[std::size_t(i)])) found.push_back(i);
+                    }
+                    return found;
+                },
+                concat<std::int32_t>);
+            // A vertex stays on its side of the other sheet's tangent plane, at least a third of the gap extracted or a
+            // twentieth of a voxel from it, wherever both end up: both sides of a thin wall or gap snap onto the input's
+            // two sides (the scan's shell at 64: walls a voxel thick all over), but one that snaps alone, or onto the
+            // wrong side, could cross the other. An anchor's pull is along its tip, where the sheets meet: the fold
+            // checks alone judge it.
+            const std::vector<std::int32_t> crossing = tbb::parallel_reduce(
+                tbb::blocked_range<std::size_t>(0, n, 4096), std::vector<std::int32_t>(),
+                [&](const auto& r, std::vector<std::int32_t> found) {
+                    for (std::size_t v = r.begin(); v != r.end(); ++v) {
+                        const std::int32_t u = partner[v];
+                        if (u < 0 || (!changed.empty() && !changed[v] && !changed[std::size_t(u)]) || !pair_crosses(v, std::size_t(u))) continue;
+                        for (const std::size_t i : {v, std::size_t(u)})
+                            if (snapped[i]) found.push_back(std::int32_t(i));
+                    }
+                    return found;
+                },
+                concat<std::int32_t>);
+            for (auto i : put_back) tried[std::size_t(i)] = 1;
+            for (auto i : crossing) tried[std::size_t(i)] = 0;
+            put_back.insert(put_back.end(), crossing.begin(), crossing.end());
+            if (put_back.empty()) break;
+            changed.assign(n, 0);
+            for (auto i : put_back) snapped[std::size_t(i)] = 0, changed[std::size_t(i)] = 1;
+        }
+    };
+    settle({});
     // A failing face puts back all its snapped corners, where one of them alone may have turned it: each vertex a
     // face put back tries again alone, in order, against its faces and pairs as they now stand (the bunny ear's
     // rim: a vertex half a voxel from its image stayed there, 0.53 voxel under the exact warp). Not those the pair
     // check put back: letting them try too gave the feature mesher's output more crossings (the scan's 327 -> 365).
+    std::optional<Adjacency> faces_of; // vertex -> the faces around it, built when first needed
+    auto faces_around = [&]() -> const Adjacency& {
+        if (!faces_of)
+            faces_of.emplace(n, [&](auto visit) {
+                for (std::size_t f = 0; f < checks.size(); ++f)
+                    for (auto i : checks[f]) visit(std::size_t(i), std::uint32_t(f));
+            });
+        return *faces_of;
+    };
     if (std::find(tried.begin(), tried.end(), 1) != tried.end()) {
-        const Adjacency faces_of(n, [&](auto visit) {
-            for (std::size_t f = 0; f < checks.size(); ++f)
-                for (auto i : checks[f]) visit(std::size_t(i), std::uint32_t(f));
-        });
+        const Adjacency& faces = faces_around();
         const Adjacency partnered(n, [&](auto visit) { // v -> u with partner[u] == v
             for (std::size_t u = 0; u < n; ++u)
                 if (partner[u] >= 0) visit(std::size_t(partner[u]), std::uint32_t(u));
@@ -703,10 +746,89 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
         for (std::size_t v = 0; v < n; ++v) {
             if (!tried[v] || snapped[v]) continue;
             snapped[v] = 1;
-            bool fine = std::none_of(faces_of.begin(v), faces_of.end(v), [&](std::uint32_t f) { return fails(checks[f]); });
+            bool fine = std::none_of(faces.begin(v), faces.end(v), [&](std::uint32_t f) { return fails(checks[f]); });
             if (fine && partner[v] >= 0) fine = !pair_crosses(v, std::size_t(partner[v]));
             for (const std::uint32_t* u = partnered.begin(v); fine && u != partnered.end(v); ++u) fine = !pair_crosses(*u, v);
             snapped[v] = fine;
+        }
+    }
+    // A sheet folded through itself a few triangles from the move: the feature mesher's output has faces that
+    // meet at sharp edges and fans of slivers, where a snapped corner can push a triangle through one two or three
+    // triangles away that the checks above, per face and per pair of sheets, do not look at (the bunny ear edit at
+    // 128: 27 pairs crossing deeper than a thousandth of a voxel). The triangles that turn more than 45 degrees from
+    // a corner's extracted normal are tested against those around them; where two cross, their snapped corners go
+    // back, and the checks above run again on what that changed, until none crosses. Marching cubes' smooth
+    // output has few such triangles and none found crossing on the bundled edits.
+    std::vector<char> near_changed; // after the first pass: within two rings of a vertex put back
+    for (;;) {
+        const std::vector<std::uint32_t> steep = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::uint32_t>(),
+            [&](const auto& r, std::vector<std::uint32_t> found) {
+                for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                    const auto& t = checks[f];
+                    if (!snapped[std::size_t(t[0])] && !snapped[std::size_t(t[1])] && !snapped[std::size_t(t[2])]) continue;
+                    if (!near_changed.empty() && !near_changed[std::size_t(t[0])] && !near_changed[std::size_t(t[1])] && !near_changed[std::size_t(t[2])]) continue;
+                    const Eigen::Vector3d after = (at(t[1]) - at(t[0])).cross(at(t[2]) - at(t[0]));
+                    if (steep_at_corners(after, t, normal)) found.push_back(std::uint32_t(f));
+                }
+                return found;
+            },
+            concat<std::uint32_t>);
+        if (steep.empty()) break;
+        const Adjacency& faces = faces_around();
+        // The faces around face t: those with a corner on a face with a corner of t.
+        auto around = [&](const std::array<std::int32_t, 3>& t, std::vector<std::uint32_t>& out) {
+            out.clear();
+            for (const auto c : t)
+                for (const std::uint32_t* g = faces.begin(std::size_t(c)); g != faces.end(std::size_t(c)); ++g)
+                    for (const auto d : checks[*g]) out.insert(out.end(), faces.begin(std::size_t(d)), faces.end(std::size_t(d)));
+            std::sort(out.begin(), out.end());
+            out.erase(std::unique(out.begin(), out.end()), out.end());
+        };
+        auto straddles = [&](const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& plane) {
+            const Eigen::Vector3d m = (at(plane[1]) - at(plane[0])).cross(at(plane[2]) - at(plane[0]));
+            const double length = m.norm();
+            if (!(length > 0)) return false;
+            bool above = false, below = false;
+            for (const auto i : a) {
+                const double d = m.dot(at(i) - at(plane[0])) / length;
+                above |= d > kCrossDepth * options.voxel_size, below |= d < -kCrossDepth * options.voxel_size;
+            }
+            return above && below;
+        };
+        const std::vector<std::int32_t> crossing = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, steep.size(), 64), std::vector<std::int32_t>(),
+            [&](const auto& r, std::vector<std::int32_t> found) {
+                std::vector<std::uint32_t> others;
+                for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                    const auto& a = checks[steep[k]];
+                    around(a, others);
+                    for (const std::uint32_t g : others) {
+                        const auto& b = checks[g];
+                        if (g == steep[k] || !straddles(a, b) || !straddles(b, a) || !triangles_cross(at, a, b)) continue;
+                        for (const auto& t : {a, b})
+                            for (const auto i : t)
+                                if (snapped[std::size_t(i)]) found.push_back(i);
+                    }
+                }
+                return found;
+            },
+            concat<std::int32_t>);
+        if (crossing.empty()) break;
+        const std::vector<char> was_snapped = snapped;
+        std::vector<char> changed(n, 0);
+        for (auto i : crossing) snapped[std::size_t(i)] = 0, changed[std::size_t(i)] = 1;
+        settle(std::move(changed));
+        // What the next pass looks at: the faces within two rings of every vertex put back in this one.
+        near_changed.assign(n, 0);
+        std::vector<std::uint32_t> ring;
+        for (std::size_t v = 0; v < n; ++v) {
+            if (was_snapped[v] == snapped[v]) continue;
+            for (const std::uint32_t* g = faces.begin(v); g != faces.end(v); ++g) {
+                around(checks[*g], ring);
+                for (const std::uint32_t f : ring)
+                    for (const auto c : checks[f]) near_changed[std::size_t(c)] = 1;
+            }
         }
     }
     SnapReport report;
@@ -812,28 +934,6 @@ constexpr double kCreaseSpacing = 0.5;
 
 /// An input vertex whose faces meet at more than this angle (degrees) is a corner: a tip, or where creases meet.
 constexpr double kCornerAngle = 10;
-
-/// Whether the segment p-q passes through triangle abc.
-bool segment_meets(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-    const double u = internal::line_meets_triangle(p, q - p, a, b, c);
-    return u >= 0 && u <= 1;
-}
-
-/// Whether triangles a and b (vertex indices into P) cross: a side of either passes through the other, sides that
-/// share a corner with the other not counted (they meet there).
-/// `at(i)`: the position of corner i.
-template <class At>
-bool triangles_cross(const At& at, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b) {
-    auto side_through = [&](const std::array<std::int32_t, 3>& s, const std::array<std::int32_t, 3>& t) {
-        for (int k = 0; k < 3; ++k) {
-            const std::int32_t e0 = s[std::size_t(k)], e1 = s[std::size_t((k + 1) % 3)];
-            if (std::find(t.begin(), t.end(), e0) != t.end() || std::find(t.begin(), t.end(), e1) != t.end()) continue;
-            if (segment_meets(at(e0), at(e1), at(t[0]), at(t[1]), at(t[2]))) return true;
-        }
-        return false;
-    };
-    return side_through(a, b) || side_through(b, a);
-}
 
 /// A point of the input where its faces meet at an angle (a corner, or a point of a crease), the faces it lies on
 /// and a source point for it.
@@ -1630,6 +1730,19 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 return false;
             });
         };
+        // Whether cut triangle c has a piece turned more than 45 degrees from the extracted normal at one of its
+        // corners: where the feature mesher's sharp edges and slivers are, a piece can pass through a triangle two
+        // or three away, and such a triangle is tested for crossings as a rim's is.
+        auto steep = [&](std::size_t c, std::vector<std::array<Corner, 3>>& parts) {
+            const auto& t = T[std::size_t(cut[c].first)];
+            parts.clear();
+            pieces_of(c, parts);
+            return std::any_of(parts.begin(), parts.end(), [&](const auto& p) {
+                const Eigen::Vector3d after = (position(p[1]) - position(p[0])).cross(position(p[2]) - position(p[0]));
+                return steep_at_corners(after, t, normal);
+            });
+        };
+        auto tested = [&](std::size_t c, std::vector<std::array<Corner, 3>>& parts) { return on_rim(c) || steep(c, parts); };
         std::vector<std::int32_t> cut_of; // per triangle: its index in cut, or -1 (made when a rim is split)
         struct Box3 {
             Eigen::Vector3d lo, hi;
@@ -1679,14 +1792,22 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 for (auto i : whole) split[std::size_t(i)] = 0;
             }
             // A rim's pieces reach up to 1.5 voxels off the output, where they may pass through its far sheet or a
-            // neighbour's pieces: each rim triangle's pieces against every triangle (cut ones by their pieces) whose
-            // box meets theirs, and a rim triangle with a crossing gives up its rim splits; until none crosses. The
+            // neighbour's pieces, and a steep triangle's (above) through one a few triangles away: each such
+            // triangle's pieces against every triangle (cut ones by their pieces) whose box meets theirs, and one
+            // with a crossing gives up its rim splits (a steep one, all its splits); until none crosses. The
             // rims tested: all of them the first time, then those near a cut triangle whose splits changed since
             // (given up for a crossing, or undone by the folds that followed), the only places where pieces moved.
             std::vector<std::size_t> rims;
             if (tested_split.empty()) {
-                for (std::size_t c = 0; c < cut.size(); ++c)
-                    if (on_rim(c)) rims.push_back(c);
+                rims = tbb::parallel_reduce(
+                    tbb::blocked_range<std::size_t>(0, cut.size(), 1024), std::vector<std::size_t>(),
+                    [&](const auto& r, std::vector<std::size_t> found) {
+                        std::vector<std::array<Corner, 3>> parts;
+                        for (std::size_t c = r.begin(); c != r.end(); ++c)
+                            if (tested(c, parts)) found.push_back(c);
+                        return found;
+                    },
+                    concat<std::size_t>);
             } else {
                 std::vector<Box3> dirty;
                 for (std::size_t c = 0; c < cut.size(); ++c)
@@ -1695,8 +1816,9 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                         b.lo.array() -= 2 * h, b.hi.array() += 2 * h;
                         dirty.push_back(b);
                     }
+                std::vector<std::array<Corner, 3>> parts;
                 for (std::size_t c = 0; c < cut.size(); ++c)
-                    if (on_rim(c)) {
+                    if (tested(c, parts)) {
                         const Box3 b = reach_of(c);
                         if (std::any_of(dirty.begin(), dirty.end(), [&](const Box3& d) { return d.meets(b); })) rims.push_back(c);
                     }
@@ -1817,9 +1939,11 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
             std::vector<std::size_t> crossing;
             for (const std::uint32_t q : found_rims) crossing.push_back(rims[q]);
             if (crossing.empty()) break;
-            for (const std::size_t c : crossing)
+            for (const std::size_t c : crossing) {
+                const bool rim = on_rim(c);
                 for (const auto i : cut[c].second)
-                    if (on(i) && splits[std::size_t(i)].rim) split[std::size_t(i)] = 0;
+                    if (on(i) && (splits[std::size_t(i)].rim || !rim)) split[std::size_t(i)] = 0;
+            }
         }
         // New vertices in edge order; each cut triangle's first piece in its place, the others at the end.
         std::vector<std::int32_t> id(splits.size(), -1);
