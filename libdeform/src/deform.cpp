@@ -570,7 +570,7 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     std::vector<SourcePoint> sources;
     if (options.snap && out.face_count() > 0) {
         const auto ts = Clock::now();
-        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so); // finds the sources too
+        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so, {.steep_crossings = eo.mesher == Mesher::features}); // finds the sources too
         report.snap = true;
         report.refined_vertices = sr.refined;
         report.snapped_vertices = sr.snapped;

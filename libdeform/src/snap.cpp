@@ -1743,7 +1743,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 return steep_at_corners(after, t, normal);
             });
         };
-        auto tested = [&](std::size_t c, std::vector<std::array<Corner, 3>>& parts) { return on_rim(c) || steep(c, parts); };
+        auto tested = [&](std::size_t c, std::vector<std::array<Corner, 3>>& parts) { return on_rim(c) || (refine.steep_crossings && steep(c, parts)); };
         std::vector<std::int32_t> cut_of; // per triangle: its index in cut, or -1 (made when a rim is split)
         struct Box3 {
             Eigen::Vector3d lo, hi;
