@@ -760,7 +760,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
     // where two cross, their snapped corners go back, and the checks above run again on what that changed, until
     // none crosses. Marching cubes' smoother output has fewer such triangles, and none found crossing on the bundled
     // edits.
-    std::vector<char> near_changed; // after the first pass: within two rings of a vertex put back
+    std::vector<char> near_changed; // after the first pass: the corners of the faces around a vertex put back
     for (;;) {
         const std::vector<std::uint32_t> steep = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, checks.size(), 4096), std::vector<std::uint32_t>(),
@@ -787,15 +787,7 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
             out.erase(std::unique(out.begin(), out.end()), out.end());
         };
         auto straddles = [&](const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& plane) {
-            const Eigen::Vector3d m = (at(plane[1]) - at(plane[0])).cross(at(plane[2]) - at(plane[0]));
-            const double length = m.norm();
-            if (!(length > 0)) return false;
-            bool above = false, below = false;
-            for (const auto i : a) {
-                const double d = m.dot(at(i) - at(plane[0])) / length;
-                above |= d > kCrossDepth * options.voxel_size, below |= d < -kCrossDepth * options.voxel_size;
-            }
-            return above && below;
+            return internal::straddle_depth(at(a[0]), at(a[1]), at(a[2]), at(plane[0]), at(plane[1]), at(plane[2])) > kCrossDepth * options.voxel_size;
         };
         const std::vector<std::int32_t> crossing = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, steep.size(), 64), std::vector<std::int32_t>(),
@@ -820,7 +812,8 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
         std::vector<char> changed(n, 0);
         for (auto i : crossing) snapped[std::size_t(i)] = 0, changed[std::size_t(i)] = 1;
         settle(std::move(changed));
-        // What the next pass looks at: the faces within two rings of every vertex put back in this one.
+        // What the next pass looks at: only a pair with a corner put back can cross anew, so the faces around (as
+        // around() has it) each face of a vertex put back in this one.
         near_changed.assign(n, 0);
         std::vector<std::uint32_t> ring;
         for (std::size_t v = 0; v < n; ++v) {
@@ -1818,11 +1811,10 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                         dirty.push_back(b);
                     }
                 std::vector<std::array<Corner, 3>> parts;
-                for (std::size_t c = 0; c < cut.size(); ++c)
-                    if (tested(c, parts)) {
-                        const Box3 b = reach_of(c);
-                        if (std::any_of(dirty.begin(), dirty.end(), [&](const Box3& d) { return d.meets(b); })) rims.push_back(c);
-                    }
+                for (std::size_t c = 0; c < cut.size(); ++c) {
+                    const Box3 b = reach_of(c);
+                    if (std::any_of(dirty.begin(), dirty.end(), [&](const Box3& d) { return d.meets(b); }) && tested(c, parts)) rims.push_back(c);
+                }
             }
             if (rims.empty()) break;
             tested_split = split;

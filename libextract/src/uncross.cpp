@@ -5,6 +5,8 @@
 // over 120 places, 239 of them crossing deeper than 1e-4 voxel).
 #include "features.h"
 
+#include <voxwarp_internal/geometry.h>
+
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/intersections.h>
 
@@ -33,16 +35,8 @@ Point point(const Eigen::Vector3d& p) { return {p.x(), p.y(), p.z()}; }
 /// unfold().
 bool cross(const std::vector<Eigen::Vector3d>& v, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b, double tiny) {
     auto straddles = [&](const std::array<std::int32_t, 3>& t, const std::array<std::int32_t, 3>& plane) {
-        const Eigen::Vector3d &p = v[std::size_t(plane[0])], &q = v[std::size_t(plane[1])], &r = v[std::size_t(plane[2])];
-        const Eigen::Vector3d n = (q - p).cross(r - p);
-        const double length = n.norm();
-        if (!(length > 0)) return false;
-        bool above = false, below = false;
-        for (const auto i : t) {
-            const double d = n.dot(v[std::size_t(i)] - p) / length;
-            above |= d > tiny, below |= d < -tiny;
-        }
-        return above && below;
+        return internal::straddle_depth(v[std::size_t(t[0])], v[std::size_t(t[1])], v[std::size_t(t[2])], v[std::size_t(plane[0])], v[std::size_t(plane[1])],
+                                        v[std::size_t(plane[2])]) > tiny;
     };
     if (!straddles(a, b) || !straddles(b, a)) return false;
     const std::array<Point, 3> pa{point(v[std::size_t(a[0])]), point(v[std::size_t(a[1])]), point(v[std::size_t(a[2])])};

@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <limits>
@@ -32,6 +33,23 @@ inline Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen
     if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
     const double denom = 1.0 / (va + vb + vc);
     return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+/// How far triangle (a, b, c) passes through the plane of triangle (p, q, r) on its shallower side: the least of
+/// its deepest corner above the plane and its deepest below (world units); 0 when it keeps to one side, or the
+/// plane's triangle has no area. Two triangles cross deeper than `tiny` only where each passes through the other's
+/// plane by more than that.
+inline double straddle_depth(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, const Eigen::Vector3d& p,
+                             const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
+    const Eigen::Vector3d n = (q - p).cross(r - p);
+    const double length = n.norm();
+    if (!(length > 0)) return 0;
+    double above = 0, below = 0;
+    for (const Eigen::Vector3d* x : {&a, &b, &c}) {
+        const double d = n.dot(*x - p) / length;
+        above = std::max(above, d), below = std::min(below, d);
+    }
+    return std::min(above, -below);
 }
 
 /// Where the line o + t d meets triangle (a, b, c) (Moller & Trumbore): its parameter t, of either sign, or NaN
