@@ -532,12 +532,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         std::vector<std::pair<std::uint64_t, std::size_t>> outer; // (the fan's outer edge, triangle), sorted
         for (const std::size_t f : fan_triangles) outer.push_back({undirected(triangles[f][1], triangles[f][2]), f});
         std::sort(outer.begin(), outer.end());
+        // The centres joined by a flip. No fan's triangle joins two centres (its outer corners are marching cubes'
+        // vertices), so these are all the edges between centres: the only ones asked about.
         std::unordered_set<std::uint64_t> joined;
-        joined.reserve(3 * added.size());
-        for (const std::size_t f : fan_triangles) {
-            const auto& t = triangles[f];
-            for (int c = 0; c < 3; ++c) joined.insert(undirected(t[std::size_t(c)], t[std::size_t((c + 1) % 3)]));
-        }
         auto normal = [&](const std::array<std::int32_t, 3>& t) {
             return Eigen::Vector3d((out.vertices[std::size_t(t[1])] - out.vertices[std::size_t(t[0])]).cross(out.vertices[std::size_t(t[2])] - out.vertices[std::size_t(t[0])]));
         };
@@ -552,7 +549,6 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             const Eigen::Vector3d before = normal(A) + normal(B);
             if (normal(A2).dot(before) <= 0 || normal(B2).dot(before) <= 0) continue;
             if (normal(A2).dot(normal(B2)) <= -0.5 * normal(A2).norm() * normal(B2).norm()) continue; // folded
-            joined.erase(undirected(v, w));
             joined.insert(undirected(f, g));
             A = A2, B = B2;
         }
