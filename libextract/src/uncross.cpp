@@ -130,7 +130,7 @@ using Pairs = std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>>;
 /// the cells of its box, as at first, took 0.17 s a call on the bunny ear edit at 256, for pairs in different cells
 /// that cannot cross.
 Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<std::uint64_t>& cell,
-                           const std::vector<std::uint8_t>& some, double side) {
+                           const std::vector<std::uint8_t>& some, double side, const SparseVoxmap& voxmap) {
     const std::size_t nt = triangles.size();
     tbb::enumerable_thread_specific<std::vector<std::pair<std::uint32_t, std::uint32_t>>> found;
     const std::vector<std::uint32_t> loose = select_in_parallel(nt, [&](std::size_t t) { return cell[t] == kFree; });
@@ -206,6 +206,14 @@ Pairs pairs_that_may_cross(const Reach& reach, const std::vector<std::array<std:
         Eigen::Vector3d lo, hi;
         for (std::size_t a = range.begin(); a != range.end(); ++a) {
             if (cell[a] == kFree) continue;
+            // It stays in its cell (cell_bound): the free ones' cells that cell meets are all it may meet. Triangles
+            // far from the free ones are passed by without reading their corners (this loop 13 -> 10 ms at 256).
+            const Index3 c = key_cell(cell[a]);
+            constexpr double kSlack = 1e-3; // index units, over cell_bound's own
+            bool near = false;
+            for_each_cell(voxmap.world(double(c[0]) - kSlack, double(c[1]) - kSlack, double(c[2]) - kSlack),
+                          voxmap.world(double(c[0]) + 1 + kSlack, double(c[1]) + 1 + kSlack, double(c[2]) + 1 + kSlack), [&](std::uint64_t k) { near |= may_hold(k); });
+            if (!near) continue;
             reach.box(triangles[a], lo, hi);
             if ((hi.array() < origin.array()).any()) continue;
             for_each_cell(lo, hi, [&](std::uint64_t k) {
@@ -235,14 +243,18 @@ std::vector<std::uint32_t> crossing_triangles(const std::vector<Eigen::Vector3d>
                 if ((looked[a] || looked[b]) && cross(v, triangles[a], triangles[b], tiny)) local.push_back(a), local.push_back(b);
             }
         });
-    // Each triangle with those after it in its cell's run (the free ones between do not end a run).
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nt, 4096), [&](const auto& range) {
+    // Each marked triangle with the others in its cell's run (the free ones between do not end a run): those after
+    // it, and those before it that are not marked (a marked one found the pair itself). Walking from the marked
+    // ones only, later passes (a few hundred marked) skip the rest of the mesh.
+    const std::vector<std::uint32_t> marked = select_in_parallel(nt, [&](std::size_t f) { return looked[f] && cell[f] != kFree; });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, marked.size(), 1024), [&](const auto& range) {
         auto& local = found.local();
-        for (std::size_t a = range.begin(); a != range.end(); ++a) {
-            if (cell[a] == kFree) continue;
-            for (std::size_t b = a + 1; b < nt && (cell[b] == cell[a] || cell[b] == kFree); ++b)
-                if (cell[b] == cell[a] && (looked[a] || looked[b]) && cross(v, triangles[a], triangles[b], tiny))
-                    local.push_back(std::uint32_t(a)), local.push_back(std::uint32_t(b));
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            const std::size_t x = marked[i];
+            for (std::size_t b = x + 1; b < nt && (cell[b] == cell[x] || cell[b] == kFree); ++b)
+                if (cell[b] == cell[x] && cross(v, triangles[x], triangles[b], tiny)) local.push_back(std::uint32_t(x)), local.push_back(std::uint32_t(b));
+            for (std::size_t a = x; a-- > 0 && (cell[a] == cell[x] || cell[a] == kFree);)
+                if (cell[a] == cell[x] && !looked[a] && cross(v, triangles[a], triangles[x], tiny)) local.push_back(std::uint32_t(a)), local.push_back(std::uint32_t(x));
         }
     });
     std::vector<std::uint32_t> out;
@@ -306,7 +318,7 @@ std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const
         return looked;
     };
     std::vector<std::uint8_t> looked = with_a_corner_in(moved);
-    const Pairs pairs = pairs_that_may_cross(reach, triangles, cell, looked, 2 * voxmap.voxel_size());
+    const Pairs pairs = pairs_that_may_cross(reach, triangles, cell, looked, 2 * voxmap.voxel_size(), voxmap);
     // Only triangles with a corner moved in the last pass can cross anew. What crosses with every corner back is
     // returned.
     std::vector<std::uint8_t> suspect(nt, 0);
