@@ -245,6 +245,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             }
         }
     });
+    // The feature surface's cells are not read again: their memory goes back before the builds, which need as much.
+    const bool on_feature_surface = grid != nullptr;
+    grid.reset();
     const std::size_t nt = mesh.triangles.size();
 
     // The triangles looked at from here on: those with a corner that has a normal (all, without a feature surface).
@@ -476,7 +479,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         // (these fans took turned cubes' edges from 0.46 voxel off at worst to 0.18). Normals from the density's
         // gradient are not trusted that far.
         const Loop& first = features[std::size_t(members[0])];
-        const double slack = first.rank == 3 ? 1.0 : grid ? 0.8 : 0.05;
+        const double slack = first.rank == 3 ? 1.0 : on_feature_surface ? 0.8 : 0.05;
         const Eigen::Vector3d q = voxmap.index_of(point);
         if (((q - lo).array() < -slack).any() || ((q - hi).array() > slack).any()) return;
         if (first.rank == 2 && members.size() == 1)
