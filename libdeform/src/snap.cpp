@@ -1762,23 +1762,16 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         // Whether a cut triangle's pieces fold depends on its own sides' splits only: after the first pass, the
         // fold test looks again only at the cut triangles beside a split just given up (at 256, a few hundred of
         // 41,000 a pass, where each pass over all took 3-4 ms).
-        std::vector<std::uint32_t> cuts_from(splits.size() + 1, 0), cuts_beside; // per split: the cut triangles with it as a side
-        for (const auto& [f, sides] : cut)
-            for (const auto i : sides)
-                if (i >= 0) ++cuts_from[std::size_t(i) + 1];
-        for (std::size_t i = 1; i < cuts_from.size(); ++i) cuts_from[i] += cuts_from[i - 1];
-        cuts_beside.resize(cuts_from.back());
-        {
-            std::vector<std::uint32_t> fill(cuts_from.begin(), cuts_from.end() - 1);
+        const Adjacency cuts_beside(splits.size(), [&](auto visit) { // per split: the cut triangles with it as a side
             for (std::size_t c = 0; c < cut.size(); ++c)
                 for (const auto i : cut[c].second)
-                    if (i >= 0) cuts_beside[fill[std::size_t(i)]++] = std::uint32_t(c);
-        }
+                    if (i >= 0) visit(std::size_t(i), std::uint32_t(c));
+        });
         std::vector<std::uint32_t> fold_test(cut.size()); // the cut triangles the next fold pass looks at
         std::iota(fold_test.begin(), fold_test.end(), std::uint32_t(0));
         auto beside = [&](const std::vector<std::int32_t>& given_up) {
             std::vector<std::uint32_t> next;
-            for (const auto i : given_up) next.insert(next.end(), cuts_beside.begin() + cuts_from[std::size_t(i)], cuts_beside.begin() + cuts_from[std::size_t(i) + 1]);
+            for (const auto i : given_up) next.insert(next.end(), cuts_beside.begin(std::size_t(i)), cuts_beside.end(std::size_t(i)));
             std::sort(next.begin(), next.end());
             next.erase(std::unique(next.begin(), next.end()), next.end());
             return next;
