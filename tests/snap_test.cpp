@@ -520,13 +520,15 @@ TEST(FeatureMesher, NoSheetCrossesAnotherOnTheBundledEdits) {
     }
 }
 
-TEST(FeatureMesher, SnappingPushesFewTrianglesThroughTheirNeighbours) {
+TEST(FeatureMesher, SnappedOutputCrossesNowhere) {
     // Snapping the feature mesher's output moved corners of its fans and slivers at sharp edges through triangles
     // two or three away, which the checks per face and per pair of sheets never compare: pairs crossing deeper than
     // a thousandth of a voxel after the bundled edits at 128 (snapped, refined): bunny ear 28, bar bend 19, box twist
-    // 1. Snapped triangles that turn over 45 degrees from a corner's normal are now tested against those two rings
-    // around them (snap.cpp), 10, 6 and 0, and so are refinement's split triangles: 5, 0 and 0.
-    for (const auto& [model, edit, most] : {std::tuple{"bunny.obj", "bunny_ear.json", 8}, {"bar.obj", "bar_bend.json", 0}, {"box.obj", "box_twist.json", 0}}) {
+    // 1, the snowden scan 292. Testing steep triangles against those two rings around them left 5, 0, 0 and 69 (31
+    // of the scan's between separate sheets of its shell). Now the whole output is searched for crossing pairs and
+    // their corners put back where extraction made them: none left, with 23 and 277 vertices put back on the bunny
+    // and the scan.
+    for (const auto& [model, edit] : {std::pair{"bunny.obj", "bunny_ear.json"}, {"bar.obj", "bar_bend.json"}, {"box.obj", "box_twist.json"}, {"snowden_lo.obj", "snowden_nose.json"}}) {
         SCOPED_TRACE(edit);
         DeformOptions options;
         options.voxelize.resolution = 128;
@@ -534,8 +536,11 @@ TEST(FeatureMesher, SnappingPushesFewTrianglesThroughTheirNeighbours) {
         DeformReport report;
         const TriangleMesh out = deform_mesh(read_mesh(test::data_path(model)), read_edit_file(test::data_path(edit)), options, report);
         const std::size_t deep = crossings_deeper_than(out, 1e-3 * report.voxel_size);
-        std::printf("%s at 128, features, snapped: %zu pairs crossing deeper than 1e-3 voxel\n", edit, deep);
-        EXPECT_LE(deep, std::size_t(most));
+        std::printf("%s at 128, features, snapped: %zu pairs crossing deeper than 1e-3 voxel, %zu of %zu vertices put back\n", edit, deep, report.put_back_vertices,
+                    out.vertices.size());
+        EXPECT_EQ(deep, 0u);
+        // Putting back costs accuracy where it acts: a few hundred vertices at most.
+        EXPECT_LE(report.put_back_vertices, out.vertices.size() / 200);
         EXPECT_TRUE(topology(out).watertight());
     }
 }

@@ -570,9 +570,10 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     std::vector<SourcePoint> sources;
     if (options.snap && out.face_count() > 0) {
         const auto ts = Clock::now();
-        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so, {.steep_crossings = eo.mesher == Mesher::features}); // finds the sources too
+        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so, {.steep_crossings = eo.mesher == Mesher::features, .put_back_crossings = eo.mesher == Mesher::features}); // finds the sources too
         report.snap = true;
         report.refined_vertices = sr.refined;
+        report.put_back_vertices = sr.put_back;
         report.snapped_vertices = sr.snapped;
         report.unsnapped_vertices = sr.unsnapped;
         report.partly_snapped_vertices = sr.partly_snapped;

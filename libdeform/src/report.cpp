@@ -57,6 +57,7 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
         j["unsnapped_vertices"] = r.unsnapped_vertices;
         j["partly_snapped_vertices"] = r.partly_snapped_vertices;
         j["refined_vertices"] = r.refined_vertices;
+        j["put_back_vertices"] = r.put_back_vertices;
         j["attributes"] = r.attributes;
         if (r.attributes) j["triangles_across_charts"] = r.triangles_across_charts;
     }

@@ -19,6 +19,7 @@
 #include <CGAL/Simple_cartesian.h>
 
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
@@ -1305,7 +1306,8 @@ private:
 /// Returns the vertices added; `settled` marks the points put in, and those the output passes within `chord` of or
 /// has nothing within `reach` of (not looked at again).
 std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface, const std::vector<WarpStep>& steps,
-                          const std::vector<FeaturePoint>& points, std::vector<char>& settled, double chord, double reach, OutputIndex& index) {
+                          const std::vector<FeaturePoint>& points, std::vector<char>& settled, double chord, double reach, OutputIndex& index,
+                          std::vector<Eigen::Vector3d>* home) {
     std::vector<Eigen::Vector3d>& P = output.vertices;
     auto& T = output.triangles;
     const std::size_t ni = points.size();
@@ -1328,6 +1330,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
         Few<std::uint32_t, 2> triangles;               // those it replaces (one, or the two of a side)
         Few<std::array<std::int32_t, 3>, 4> pieces;    // two or three per triangle, in order
         Eigen::Vector3d at;
+        Eigen::Vector3d home = Eigen::Vector3d::Zero(); ///< on the triangle (or side) it splits, as `home` has its corners
         SourcePoint source;
     };
     // The split each waiting point proposes (its nearest triangle's), from the output as the pass found it.
@@ -1433,9 +1436,20 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
             const bool on_side = w[least] < kCornerSide;
             for (int attempt = 0; attempt < 4; ++attempt) { // each built only when the ones before it fold
                 const bool inside = attempt == (on_side ? 1 : 0);
-                std::optional<Insert> in = inside ? split_inside(f) : split_side(f, attempt < 2 ? least : (least + attempt - 1) % 3);
+                const int side = attempt < 2 ? least : (least + attempt - 1) % 3;
+                std::optional<Insert> in = inside ? split_inside(f) : split_side(f, side);
                 if (in && sound(*in)) {
                     in->source = point.source;
+                    if (home) {
+                        const auto& t = T[f];
+                        auto H = [&](int k) -> const Eigen::Vector3d& { return (*home)[std::size_t(t[std::size_t(k)])]; };
+                        if (inside) {
+                            in->home = w[0] * H(0) + w[1] * H(1) + w[2] * H(2);
+                        } else { // on the side opposite corner `side`, where the point's weights put it
+                            const double a = w[(side + 1) % 3], b = w[(side + 2) % 3], u = a + b > 0 ? b / (a + b) : 0.5;
+                            in->home = (1 - u) * H((side + 1) % 3) + u * H((side + 2) % 3);
+                        }
+                    }
                     return in;
                 }
             }
@@ -1575,6 +1589,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
     for (std::size_t b = 0; b < selected.size(); ++b) {
         const Insert& in = found[selected[b]];
         sources.push_back(in.source);
+        if (home) home->push_back(in.home);
         const std::size_t per = (put_from[b + 1] - put_from[b]) / in.triangles.size();
         for (std::size_t q = 0; q < put_from[b + 1] - put_from[b]; ++q) {
             const auto& piece = put[put_from[b] + q];
@@ -1588,7 +1603,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
 
 /// refine_to_sources, its first round with `first` (computed when empty).
 std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
-                 const SnapOptions& options, const RefineOptions& refine, Sheets first) {
+                 const SnapOptions& options, const RefineOptions& refine, Sheets first, std::vector<Eigen::Vector3d>* home = nullptr) {
     check_options(options);
     if (sources.size() != output.vertices.size())
         throw InvalidInput("refine: " + std::to_string(sources.size()) + " source points for " + std::to_string(output.vertices.size()) + " vertices");
@@ -1966,7 +1981,10 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         // New vertices in edge order; each cut triangle's first piece in its place, the others at the end.
         std::vector<std::int32_t> id(splits.size(), -1);
         for (std::size_t i = 0; i < splits.size(); ++i)
-            if (split[i]) id[i] = std::int32_t(P.size()), P.push_back(splits[i].at), sources.push_back(splits[i].source);
+            if (split[i]) {
+                id[i] = std::int32_t(P.size()), P.push_back(splits[i].at), sources.push_back(splits[i].source);
+                if (home) home->push_back(0.5 * ((*home)[splits[i].edge >> 32] + (*home)[splits[i].edge & 0xffffffffu]));
+            }
         if (P.size() == n) break;
         added += P.size() - n;
         output.triangles.reserve(F + 3 * (P.size() - n)); // a split edge adds a piece to each of its two triangles
@@ -1988,13 +2006,209 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         std::vector<char> settled(points.size(), 0);
         OutputIndex index(output, h);
         for (int round = 0; round < kInsertRounds; ++round) {
-            const std::size_t more = insert_points(output, sources, surface, steps, points, settled, chord, kCornerReach * h, index);
+            const std::size_t more = insert_points(output, sources, surface, steps, points, settled, chord, kCornerReach * h, index, home);
             added += more;
             if (more == 0) break;
             if (round + 1 >= kInsertRoundsAlways && std::count(settled.begin(), settled.end(), 0) > kLatePassPoints) break;
         }
     }
     return added;
+}
+
+/// The output's triangles filed for finding the pairs that cross (put_back_crossings): each under every row of
+/// cells a voxel square, running along x, that the box of its corners meets, where they are and at home, sorted
+/// in each row by where that box begins along x. Corners put back stay in those boxes, so one filing serves every
+/// pass.
+class CrossingIndex {
+public:
+    using Pair = std::pair<std::uint32_t, std::uint32_t>;
+    CrossingIndex(const TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, double h) : T_(output.triangles), P_(output.vertices), home_(home) {
+        const auto& P = output.vertices;
+        const std::size_t F = T_.size();
+        Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+        for (std::size_t v = 0; v < P.size(); ++v) lo = lo.cwiseMin(P[v]).cwiseMin(home[v]), hi = hi.cwiseMax(P[v]).cwiseMax(home[v]);
+        // Cells a voxel wide, unless there would be more than 60,000 a side or 4 million rows (a mesh far larger
+        // than its voxmap: the cells then grow).
+        const Eigen::Vector3d extent = (hi - lo).cwiseMax(0.0);
+        const double cell = std::max({h, extent.y() / 60000, extent.z() / 60000, std::sqrt(extent.y() * extent.z() / 4e6)}) * (1 + 1e-9);
+        ny_ = std::size_t(extent.y() / cell) + 1;
+        const std::size_t nz = std::size_t(extent.z() / cell) + 1;
+        low_ = lo, cell_ = cell;
+        // Counted into rows, filed by atomic slots, each row then sorted: no sort of the whole, and no array per
+        // triangle (the ranges are worked out again: at 256, fresh pages for one cost more than the arithmetic).
+        std::vector<std::atomic<std::uint32_t>> count(ny_ * nz + 1);
+        widest_ = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, F, 4096), 0.0f,
+            [&](const auto& r, float widest) {
+                for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                    const Range g = range(std::uint32_t(f));
+                    widest = std::max(widest, g.x1 - g.x0);
+                    each_row(g, [&](std::size_t row) { count[row + 1].fetch_add(1, std::memory_order_relaxed); });
+                }
+                return widest;
+            },
+            [](float a, float b) { return std::max(a, b); });
+        start_.resize(count.size());
+        start_[0] = 0;
+        for (std::size_t k = 1; k < count.size(); ++k) start_[k] = start_[k - 1] + count[k].load(std::memory_order_relaxed);
+        for (std::size_t k = 0; k + 1 < count.size(); ++k) count[k].store(start_[k], std::memory_order_relaxed);
+        entries_ = std::make_unique_for_overwrite<Entry[]>(start_.back());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, F, 4096), [&](const auto& r) {
+            for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                const Range g = range(std::uint32_t(f));
+                each_row(g, [&](std::size_t row) { entries_[count[row].fetch_add(1, std::memory_order_relaxed)] = {std::uint32_t(f), g.x0, g.x1, g.lo}; });
+            }
+        });
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, start_.size() - 1, 256), [&](const auto& r) {
+            for (std::size_t row = r.begin(); row != r.end(); ++row)
+                std::sort(entries_.get() + start_[row], entries_.get() + start_[row + 1], [](const Entry& a, const Entry& b) { return a.x0 < b.x0 || (a.x0 == b.x0 && a.f < b.f); });
+        });
+    }
+
+    /// The pairs that cross by snapping's test (each passes through the other's plane by more than `depth`, and a
+    /// side of one through the other), each once, lower triangle first, sorted; with `marked`, only the pairs with
+    /// a triangle it lists.
+    std::vector<Pair> crossing(const std::vector<Eigen::Vector3d>& P, double depth, const std::vector<std::uint32_t>* marked) const {
+        auto pos = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
+        // A pair is tested in the one row both are filed under whose (y, z) is the least corner of their boxes'
+        // meeting.
+        auto canonical = [&](std::size_t row, const std::array<std::uint16_t, 2>& a, const std::array<std::uint16_t, 2>& b) {
+            return row == std::size_t(std::max(a[0], b[0])) + ny_ * std::max(a[1], b[1]);
+        };
+        std::vector<Pair> pairs;
+        if (!marked) {
+            // Row by row, each triangle's corners, box and unit normal worked out once into a small buffer: most
+            // pairs are then settled by their boxes or planes without a look at the mesh.
+            struct Near {
+                std::array<Eigen::Vector3d, 3> v;
+                Eigen::Vector3d lo, hi, n; ///< n: zero where the triangle has no area
+            };
+            // How far a passes through b's plane on its shallower side.
+            auto through = [](const Near& a, const Near& b) {
+                double above = 0, below = 0;
+                for (const auto& x : a.v) {
+                    const double d = b.n.dot(x - b.v[0]);
+                    above = std::max(above, d), below = std::min(below, d);
+                }
+                return std::min(above, -below);
+            };
+            tbb::enumerable_thread_specific<std::vector<Near>> buffers;
+            pairs = tbb::parallel_reduce(
+                tbb::blocked_range<std::size_t>(0, start_.size() - 1, 256), std::vector<Pair>(),
+                [&](const auto& r, std::vector<Pair> found) {
+                    std::vector<Near>& near = buffers.local();
+                    for (std::size_t row = r.begin(); row != r.end(); ++row) {
+                        const Entry* e = entries_.get() + start_[row];
+                        const std::size_t count = start_[row + 1] - start_[row];
+                        if (count < 2) continue;
+                        near.resize(count);
+                        for (std::size_t i = 0; i < count; ++i) {
+                            Near& q = near[i];
+                            for (int k = 0; k < 3; ++k) q.v[std::size_t(k)] = P[std::size_t(T_[e[i].f][std::size_t(k)])];
+                            q.lo = q.v[0].cwiseMin(q.v[1]).cwiseMin(q.v[2]), q.hi = q.v[0].cwiseMax(q.v[1]).cwiseMax(q.v[2]);
+                            q.n = (q.v[1] - q.v[0]).cross(q.v[2] - q.v[0]);
+                            const double length = q.n.norm();
+                            q.n = length > 0 ? Eigen::Vector3d(q.n / length) : Eigen::Vector3d::Zero();
+                        }
+                        for (std::size_t i = 0; i < count; ++i)
+                            for (std::size_t j = i + 1; j < count && e[j].x0 <= e[i].x1; ++j) {
+                                const Near &a = near[i], &b = near[j];
+                                if (!canonical(row, e[i].lo, e[j].lo)) continue;
+                                if ((a.lo.array() > b.hi.array()).any() || (b.lo.array() > a.hi.array()).any()) continue;
+                                if (through(a, b) > depth && through(b, a) > depth && triangles_cross(pos, T_[e[i].f], T_[e[j].f]))
+                                    found.push_back({std::min(e[i].f, e[j].f), std::max(e[i].f, e[j].f)});
+                            }
+                    }
+                    return found;
+                },
+                concat<Pair>);
+        } else {
+            auto straddles = [&](const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& plane) {
+                return internal::straddle_depth(pos(a[0]), pos(a[1]), pos(a[2]), pos(plane[0]), pos(plane[1]), pos(plane[2])) > depth;
+            };
+            for (const std::uint32_t f : *marked) {
+                const Range a = range(f);
+                each_row(a, [&](std::size_t row) {
+                    const Entry* first = entries_.get() + start_[row];
+                    const Entry* last = entries_.get() + start_[row + 1];
+                    const float from = a.x0 - widest_;
+                    for (const Entry* e = std::lower_bound(first, last, from, [](const Entry& x, float y) { return x.x0 < y; }); e != last && e->x0 <= a.x1; ++e) {
+                        if (e->f == f || e->x1 < a.x0 || !canonical(row, a.lo, e->lo)) continue;
+                        const auto &s = T_[f], &t = T_[e->f];
+                        if (straddles(s, t) && straddles(t, s) && triangles_cross(pos, s, t)) pairs.push_back({std::min(f, e->f), std::max(f, e->f)});
+                    }
+                });
+            }
+        }
+        std::sort(pairs.begin(), pairs.end());
+        pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+        return pairs;
+    }
+
+private:
+    struct Range {
+        float x0, x1;                      ///< along x, from origin_, rounded outward
+        std::array<std::uint16_t, 2> lo, hi; ///< cells along y and z
+    };
+    struct Entry {
+        std::uint32_t f;
+        float x0, x1;
+        std::array<std::uint16_t, 2> lo; ///< the triangle's Range::lo
+    };
+    /// Triangle f's box over its corners where they are and at home.
+    Range range(std::uint32_t f) const {
+        Eigen::Vector3d l = P_[std::size_t(T_[f][0])], u = l;
+        for (const auto v : T_[f]) l = l.cwiseMin(P_[std::size_t(v)]).cwiseMin(home_[std::size_t(v)]), u = u.cwiseMax(P_[std::size_t(v)]).cwiseMax(home_[std::size_t(v)]);
+        auto at = [&](double x, int a) { return std::uint16_t(std::clamp(std::floor((x - low_[a]) / cell_), 0.0, 65535.0)); };
+        return {outward(l.x() - low_.x(), -1), outward(u.x() - low_.x(), 1), {at(l.y(), 1), at(l.z(), 2)}, {at(u.y(), 1), at(u.z(), 2)}};
+    }
+    /// x as a float on the side `sign` of it.
+    static float outward(double x, int sign) {
+        float f = float(x);
+        if (sign < 0 ? double(f) > x : double(f) < x) f = std::nextafter(f, sign < 0 ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity());
+        return f;
+    }
+    template <class Visit>
+    void each_row(const Range& g, const Visit& visit) const {
+        for (std::size_t z = g.lo[1]; z <= g.hi[1]; ++z)
+            for (std::size_t y = g.lo[0]; y <= g.hi[0]; ++y) visit(y + ny_ * z);
+    }
+    const std::vector<std::array<std::int32_t, 3>>& T_;
+    const std::vector<Eigen::Vector3d>& P_; ///< where the corners are as filed, and ...
+    const std::vector<Eigen::Vector3d>& home_; ///< ... where they are put back to
+    Eigen::Vector3d low_ = Eigen::Vector3d::Zero();
+    double cell_ = 1;
+    std::size_t ny_ = 1;
+    float widest_ = 0; ///< the widest box along x
+    std::vector<std::uint32_t> start_;
+    std::unique_ptr<Entry[]> entries_;
+};
+
+/// Puts the corners of triangles that cross another back `home` (where extraction made them; a refined vertex on
+/// the triangle it split there), until none crosses: at home the output is the extracted surface, subdivided,
+/// which crosses nowhere. Returns the vertices put back.
+std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, double h) {
+    auto& P = output.vertices;
+    const auto& T = output.triangles;
+    if (T.size() < 2) return 0;
+    const CrossingIndex index(output, home, h);
+    std::size_t back = 0;
+    std::vector<char> moved(P.size(), 0);
+    std::vector<std::uint32_t> marked; // after the first pass, the triangles around a vertex put back
+    for (int pass = 0;; ++pass) {
+        const auto pairs = index.crossing(P, kCrossDepth * h, pass == 0 ? nullptr : &marked);
+        bool any = false;
+        for (const auto& [f, g] : pairs)
+            for (const std::uint32_t t : {f, g})
+                for (const std::int32_t v : T[t])
+                    if (P[std::size_t(v)] != home[std::size_t(v)]) P[std::size_t(v)] = home[std::size_t(v)], moved[std::size_t(v)] = 1, any = true, ++back;
+        if (!any) break;
+        marked.clear();
+        for (std::size_t f = 0; f < T.size(); ++f)
+            if (moved[std::size_t(T[f][0])] || moved[std::size_t(T[f][1])] || moved[std::size_t(T[f][2])]) marked.push_back(std::uint32_t(f));
+        std::fill(moved.begin(), moved.end(), 0);
+    }
+    return back;
 }
 
 } // namespace
@@ -2012,9 +2226,16 @@ SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, con
         normal = vertex_normals(output);
         sources = find_sources(output, input, steps, options, normal);
     }
+    std::vector<Eigen::Vector3d> home;
+    if (refine_options.put_back_crossings && output.quads.empty()) home = output.vertices;
     SnapReport report = snap(output, input.mesh(), steps, sources, options, &sheets, std::move(normal));
-    report.refined = refine_with(output, sources, input, steps, options, refine_options, std::move(sheets));
+    report.refined = refine_with(output, sources, input, steps, options, refine_options, std::move(sheets), home.empty() ? nullptr : &home);
     report.snapped += report.refined;
+    if (!home.empty()) {
+        report.put_back = put_back_crossings(output, home, options.voxel_size);
+        report.snapped -= std::min(report.snapped, report.put_back);
+        report.unsnapped += report.put_back;
+    }
     return report;
 }
 

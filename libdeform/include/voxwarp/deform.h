@@ -106,6 +106,7 @@ struct DeformReport {
     std::size_t snapped_vertices = 0, unsnapped_vertices = 0; ///< with snap: vertices moved, and left as extracted
     std::size_t partly_snapped_vertices = 0; ///< with snap: vertices moved half a voxel toward an image up to a voxel away
     std::size_t refined_vertices = 0; ///< with snap: vertices added on edges across the input's creases, at its corners and along its creases (refine_to_sources; among the snapped)
+    std::size_t put_back_vertices = 0; ///< with snap and the feature mesher: vertices put back where extraction made them, their triangles having crossed another (among the unsnapped)
     double seconds_snap = 0;          ///< finding source points and snapping (part of seconds_extract)
     bool attributes = false;          ///< whether the input's texture coordinates, colours or materials were carried (transfer.h)
     std::size_t triangles_across_charts = 0; ///< with attributes: output triangles straddling a UV seam (each kept in one chart)

@@ -89,6 +89,7 @@ struct SnapReport {
     std::size_t partly_snapped = 0; ///< vertices moved max_move_voxels toward an exact image up to twice that far
     std::size_t unsnapped = 0; ///< vertices left where extraction put them (no source, too far, or a face would flip)
     std::size_t refined = 0;   ///< snap_and_refine: vertices added on edges across the input's creases, and at its corners and along its creases (among the snapped)
+    std::size_t put_back = 0;  ///< snap_and_refine with RefineOptions::put_back_crossings: vertices put back where extraction made them (among the unsnapped)
 };
 
 /// Move each output vertex to the exact image of its source point, unless it has none, that moves it more than
@@ -106,6 +107,9 @@ struct RefineOptions {
     /// crossings, as a rim's: the feature mesher's sharp edges and slivers need it (its bunny ear edit at 128: 10
     /// pairs crossing -> 5, its bar bend 6 -> 0); marching cubes' output showed none, and at 256 it costs ~30 ms.
     bool steep_crossings = false;
+    /// snap_and_refine: then look for triangles crossing another over the whole output, and put their corners back
+    /// where extraction made them (a refined vertex on the triangle it split) until none crosses.
+    bool put_back_crossings = false;
 };
 
 /// Where an output edge runs across a crease or bump of the input (its two ends' sources on faces that meet at an
