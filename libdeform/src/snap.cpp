@@ -2037,11 +2037,13 @@ public:
         // Counted into rows, filed by atomic slots, each row then sorted: no sort of the whole, and no array per
         // triangle (the ranges are worked out again: at 256, fresh pages for one cost more than the arithmetic).
         std::vector<std::atomic<std::uint32_t>> count(ny_ * nz + 1);
+        lo_ = std::make_unique_for_overwrite<std::array<std::uint16_t, 2>[]>(F);
         widest_ = tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, F, 4096), 0.0f,
             [&](const auto& r, float widest) {
                 for (std::size_t f = r.begin(); f != r.end(); ++f) {
                     const Range g = range(std::uint32_t(f));
+                    lo_[f] = g.lo;
                     widest = std::max(widest, g.x1 - g.x0);
                     each_row(g, [&](std::size_t row) { count[row + 1].fetch_add(1, std::memory_order_relaxed); });
                 }
@@ -2056,7 +2058,7 @@ public:
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, F, 4096), [&](const auto& r) {
             for (std::size_t f = r.begin(); f != r.end(); ++f) {
                 const Range g = range(std::uint32_t(f));
-                each_row(g, [&](std::size_t row) { entries_[count[row].fetch_add(1, std::memory_order_relaxed)] = {std::uint32_t(f), g.x0, g.x1, g.lo}; });
+                each_row(g, [&](std::size_t row) { entries_[count[row].fetch_add(1, std::memory_order_relaxed)] = {std::uint32_t(f), g.x0}; });
             }
         });
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, start_.size() - 1, 256), [&](const auto& r) {
@@ -2082,6 +2084,7 @@ public:
             struct Near {
                 std::array<Eigen::Vector3d, 3> v;
                 Eigen::Vector3d lo, hi, n; ///< n: zero where the triangle has no area
+                std::array<std::uint16_t, 2> cell; ///< Range::lo
             };
             // How far a passes through b's plane on its shallower side.
             auto through = [](const Near& a, const Near& b) {
@@ -2109,11 +2112,14 @@ public:
                             q.n = (q.v[1] - q.v[0]).cross(q.v[2] - q.v[0]);
                             const double length = q.n.norm();
                             q.n = length > 0 ? Eigen::Vector3d(q.n / length) : Eigen::Vector3d::Zero();
+                            q.cell = lo_[e[i].f];
                         }
+                        // A box as filed begins no later than its corners' box now: past the end of this one's, no
+                        // box met later in the row meets it.
                         for (std::size_t i = 0; i < count; ++i)
-                            for (std::size_t j = i + 1; j < count && e[j].x0 <= e[i].x1; ++j) {
+                            for (std::size_t j = i + 1; j < count && double(e[j].x0) <= near[i].hi.x() - low_.x(); ++j) {
                                 const Near &a = near[i], &b = near[j];
-                                if (!canonical(row, e[i].lo, e[j].lo)) continue;
+                                if (!canonical(row, a.cell, b.cell)) continue;
                                 if ((a.lo.array() > b.hi.array()).any() || (b.lo.array() > a.hi.array()).any()) continue;
                                 if (through(a, b) > depth && through(b, a) > depth && triangles_cross(pos, T_[e[i].f], T_[e[j].f]))
                                     found.push_back({std::min(e[i].f, e[j].f), std::max(e[i].f, e[j].f)});
@@ -2133,7 +2139,7 @@ public:
                     const Entry* last = entries_.get() + start_[row + 1];
                     const float from = a.x0 - widest_;
                     for (const Entry* e = std::lower_bound(first, last, from, [](const Entry& x, float y) { return x.x0 < y; }); e != last && e->x0 <= a.x1; ++e) {
-                        if (e->f == f || e->x1 < a.x0 || !canonical(row, a.lo, e->lo)) continue;
+                        if (e->f == f || !canonical(row, a.lo, lo_[e->f])) continue;
                         const auto &s = T_[f], &t = T_[e->f];
                         if (straddles(s, t) && straddles(t, s) && triangles_cross(pos, s, t)) pairs.push_back({std::min(f, e->f), std::max(f, e->f)});
                     }
@@ -2152,8 +2158,7 @@ private:
     };
     struct Entry {
         std::uint32_t f;
-        float x0, x1;
-        std::array<std::uint16_t, 2> lo; ///< the triangle's Range::lo
+        float x0; ///< Range::x0
     };
     /// Triangle f's box over its corners where they are and at home.
     Range range(std::uint32_t f) const {
@@ -2182,6 +2187,7 @@ private:
     float widest_ = 0; ///< the widest box along x
     std::vector<std::uint32_t> start_;
     std::unique_ptr<Entry[]> entries_;
+    std::unique_ptr<std::array<std::uint16_t, 2>[]> lo_; ///< per triangle, Range::lo
 };
 
 /// Puts the corners of triangles that cross another back `home` (where extraction made them; a refined vertex on
