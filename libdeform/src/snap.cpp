@@ -2153,7 +2153,7 @@ public:
 
 private:
     struct Range {
-        float x0, x1;                      ///< along x, from origin_, rounded outward
+        float x0, x1;                        ///< along x, from low_, rounded outward
         std::array<std::uint16_t, 2> lo, hi; ///< cells along y and z
     };
     struct Entry {
