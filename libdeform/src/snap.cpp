@@ -2190,9 +2190,11 @@ private:
     std::unique_ptr<std::array<std::uint16_t, 2>[]> lo_; ///< per triangle, Range::lo
 };
 
-/// Puts the corners of triangles that cross another back `home` (where extraction made them; a refined vertex on
-/// the triangle it split there), until none crosses: at home the output is the extracted surface, subdivided,
-/// which crosses nowhere. Returns the vertices put back.
+/// Puts back `home` (where extraction made it; a refined vertex on the triangle it split there) the corner that
+/// moved farthest of each pair of triangles that cross, pass by pass until none crosses: at home the output is the
+/// extracted surface, subdivided, which crosses nowhere. Putting back all six corners of a pair at once took about
+/// twice as many vertices off the exact surface (bunny ear edit at 128: 23 against 12; the snowden scan: 277
+/// against 199). Returns the vertices put back.
 std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, double h) {
     auto& P = output.vertices;
     const auto& T = output.triangles;
@@ -2204,10 +2206,15 @@ std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Ve
     for (int pass = 0;; ++pass) {
         const auto pairs = index.crossing(P, kCrossDepth * h, pass == 0 ? nullptr : &marked);
         bool any = false;
-        for (const auto& [f, g] : pairs)
+        for (const auto& [f, g] : pairs) {
+            std::int32_t far = -1; // the corner moved farthest, still away from home
+            double most = 0;
             for (const std::uint32_t t : {f, g})
                 for (const std::int32_t v : T[t])
-                    if (P[std::size_t(v)] != home[std::size_t(v)]) P[std::size_t(v)] = home[std::size_t(v)], moved[std::size_t(v)] = 1, any = true, ++back;
+                    if (const double d = (P[std::size_t(v)] - home[std::size_t(v)]).squaredNorm(); d > most) most = d, far = v;
+            if (far < 0) continue;
+            P[std::size_t(far)] = home[std::size_t(far)], moved[std::size_t(far)] = 1, any = true, ++back;
+        }
         if (!any) break;
         marked.clear();
         for (std::size_t f = 0; f < T.size(); ++f)

@@ -107,10 +107,10 @@ struct RefineOptions {
     /// crossings, as a rim's: the feature mesher's sharp edges and slivers need it (its bunny ear edit at 128: 10
     /// pairs crossing -> 5, its bar bend 6 -> 0); marching cubes' output showed none, and at 256 it costs ~30 ms.
     bool steep_crossings = false;
-    /// snap_and_refine: then look for triangles crossing another over the whole output, and put their corners back
-    /// where extraction made them (a refined vertex on the triangle it split) until none crosses. The feature
-    /// mesher's output needs it (bunny ear edit at 128: 5 pairs crossing -> 0, 23 vertices put back; the snowden
-    /// scan 69 -> 0, 277); at 256 the search costs about 120 ms.
+    /// snap_and_refine: then look for triangles crossing another over the whole output, and put the corner that moved
+    /// farthest of each crossing pair back where extraction made it (a refined vertex on the triangle it split),
+    /// until none crosses. The feature mesher's output needs it (bunny ear edit at 128: 5 pairs crossing -> 0, 12
+    /// vertices put back; the snowden scan 69 -> 0, 199); at 256 the search costs about 120 ms.
     bool put_back_crossings = false;
 };
 
