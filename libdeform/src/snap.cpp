@@ -2190,11 +2190,15 @@ private:
     std::unique_ptr<std::array<std::uint16_t, 2>[]> lo_; ///< per triangle, Range::lo
 };
 
+/// Passes of put_back_crossings that put back one corner of each crossing pair.
+constexpr int kFarthestPasses = 16;
+
 /// Puts back `home` (where extraction made it; a refined vertex on the triangle it split there) the corner that
 /// moved farthest of each pair of triangles that cross, pass by pass until none crosses: at home the output is the
 /// extracted surface, subdivided, which crosses nowhere. Putting back all six corners of a pair at once took about
 /// twice as many vertices off the exact surface (bunny ear edit at 128: 23 against 12; the snowden scan: 277
-/// against 199). Returns the vertices put back.
+/// against 199). After kFarthestPasses passes (the bundled edits need at most 8) every corner of a pair still
+/// crossing goes back, so that no output needs many more. Returns the vertices put back.
 std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, double h) {
     auto& P = output.vertices;
     const auto& T = output.triangles;
@@ -2206,14 +2210,17 @@ std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Ve
     for (int pass = 0;; ++pass) {
         const auto pairs = index.crossing(P, kCrossDepth * h, pass == 0 ? nullptr : &marked);
         bool any = false;
+        auto put_back = [&](std::int32_t v) { P[std::size_t(v)] = home[std::size_t(v)], moved[std::size_t(v)] = 1, any = true, ++back; };
         for (const auto& [f, g] : pairs) {
             std::int32_t far = -1; // the corner moved farthest, still away from home
             double most = 0;
             for (const std::uint32_t t : {f, g})
                 for (const std::int32_t v : T[t])
-                    if (const double d = (P[std::size_t(v)] - home[std::size_t(v)]).squaredNorm(); d > most) most = d, far = v;
-            if (far < 0) continue;
-            P[std::size_t(far)] = home[std::size_t(far)], moved[std::size_t(far)] = 1, any = true, ++back;
+                    if (const double d = (P[std::size_t(v)] - home[std::size_t(v)]).squaredNorm(); d > most) {
+                        if (pass >= kFarthestPasses) put_back(v);
+                        else most = d, far = v;
+                    }
+            if (far >= 0) put_back(far);
         }
         if (!any) break;
         marked.clear();
