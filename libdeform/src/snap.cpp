@@ -2086,15 +2086,7 @@ public:
                 Eigen::Vector3d lo, hi, n; ///< n: zero where the triangle has no area
                 std::array<std::uint16_t, 2> cell; ///< Range::lo
             };
-            // How far a passes through b's plane on its shallower side.
-            auto through = [](const Near& a, const Near& b) {
-                double above = 0, below = 0;
-                for (const auto& x : a.v) {
-                    const double d = b.n.dot(x - b.v[0]);
-                    above = std::max(above, d), below = std::min(below, d);
-                }
-                return std::min(above, -below);
-            };
+            auto through = [](const Near& a, const Near& b) { return internal::straddle_depth(a.v[0], a.v[1], a.v[2], b.v[0], b.n, 1.0); };
             tbb::enumerable_thread_specific<std::vector<Near>> buffers;
             pairs = tbb::parallel_reduce(
                 tbb::blocked_range<std::size_t>(0, start_.size() - 1, 256), std::vector<Pair>(),

@@ -35,6 +35,18 @@ inline Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen
     return a + ab * (vb * denom) + ac * (vc * denom);
 }
 
+/// straddle_depth for the plane through p with normal n, `length` long (a unit normal: 1; a zero normal gives 0):
+/// for callers that test one triangle's plane against many.
+inline double straddle_depth(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, const Eigen::Vector3d& p,
+                             const Eigen::Vector3d& n, double length) {
+    double above = 0, below = 0;
+    for (const Eigen::Vector3d* x : {&a, &b, &c}) {
+        const double d = n.dot(*x - p) / length;
+        above = std::max(above, d), below = std::min(below, d);
+    }
+    return std::min(above, -below);
+}
+
 /// How far triangle (a, b, c) passes through the plane of triangle (p, q, r) on its shallower side: the least of
 /// its deepest corner above the plane and its deepest below (world units); 0 when it keeps to one side, or the
 /// plane's triangle has no area. Two triangles cross deeper than `tiny` only where each passes through the other's
@@ -44,12 +56,7 @@ inline double straddle_depth(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
     const Eigen::Vector3d n = (q - p).cross(r - p);
     const double length = n.norm();
     if (!(length > 0)) return 0;
-    double above = 0, below = 0;
-    for (const Eigen::Vector3d* x : {&a, &b, &c}) {
-        const double d = n.dot(*x - p) / length;
-        above = std::max(above, d), below = std::min(below, d);
-    }
-    return std::min(above, -below);
+    return straddle_depth(a, b, c, p, n, length);
 }
 
 /// Where the line o + t d meets triangle (a, b, c) (Moller & Trumbore): its parameter t, of either sign, or NaN
