@@ -526,6 +526,19 @@ SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions
     return voxelize_sparse(mesh, vo);
 }
 
+/// The vertices of `mesh` not on an edge of the voxmap's grid (two index coordinates whole, to round-off): those
+/// the feature mesher made or moved, around which snapping's crossing search runs (RefineOptions::crossings_near).
+std::vector<Eigen::Vector3d> off_grid_vertices(const TriangleMesh& mesh, const SparseVoxmap& voxmap) {
+    std::vector<Eigen::Vector3d> off;
+    for (const auto& p : mesh.vertices) {
+        const Eigen::Vector3d q = voxmap.index_of(p);
+        int whole = 0;
+        for (int a = 0; a < 3; ++a) whole += std::abs(q[a] - std::round(q[a])) < 1e-5;
+        if (whole < 2) off.push_back(p);
+    }
+    return off;
+}
+
 TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report,
                               const SourceSurface* surface = nullptr) {
     report.mode = "volume";
@@ -570,7 +583,11 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     std::vector<SourcePoint> sources;
     if (options.snap && out.face_count() > 0) {
         const auto ts = Clock::now();
-        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so, {.steep_crossings = eo.mesher == Mesher::features, .put_back_crossings = eo.mesher == Mesher::features}); // finds the sources too
+        RefineOptions ro{.steep_crossings = eo.mesher == Mesher::features, .put_back_crossings = eo.mesher == Mesher::features};
+        // No triangle of marching cubes' was seen crossing another after snapping: the search looks near the
+        // feature mesher's own vertices (at 256 on the bunny ear edit, about 120 ms over the whole output).
+        if (ro.put_back_crossings) ro.crossings_near = off_grid_vertices(out, voxmap);
+        const SnapReport sr = snap_and_refine(out, input_surface(), steps, sources, so, ro); // finds the sources too
         report.snap = true;
         report.refined_vertices = sr.refined;
         report.put_back_vertices = sr.put_back;

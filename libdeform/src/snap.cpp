@@ -2022,7 +2022,9 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
 class CrossingIndex {
 public:
     using Pair = std::pair<std::uint32_t, std::uint32_t>;
-    CrossingIndex(const TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, double h) : T_(output.triangles), P_(output.vertices), home_(home) {
+    /// Only the triangles `searched` lists are filed, all when it is empty.
+    CrossingIndex(const TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, const std::vector<std::uint8_t>& searched, double h)
+        : T_(output.triangles), P_(output.vertices), home_(home) {
         const auto& P = output.vertices;
         const std::size_t F = T_.size();
         Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
@@ -2042,6 +2044,7 @@ public:
             tbb::blocked_range<std::size_t>(0, F, 4096), 0.0f,
             [&](const auto& r, float widest) {
                 for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                    if (!searched.empty() && !searched[f]) continue;
                     const Range g = range(std::uint32_t(f));
                     lo_[f] = g.lo;
                     widest = std::max(widest, g.x1 - g.x0);
@@ -2057,6 +2060,7 @@ public:
         entries_ = std::make_unique_for_overwrite<Entry[]>(start_.back());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, F, 4096), [&](const auto& r) {
             for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                if (!searched.empty() && !searched[f]) continue;
                 const Range g = range(std::uint32_t(f));
                 each_row(g, [&](std::size_t row) { entries_[count[row].fetch_add(1, std::memory_order_relaxed)] = {std::uint32_t(f), g.x0}; });
             }
@@ -2182,6 +2186,42 @@ private:
     std::unique_ptr<std::array<std::uint16_t, 2>[]> lo_; ///< per triangle, Range::lo
 };
 
+/// Per triangle, whether a corner of it at `home` lies within 3 voxels of one of the points `near` (a flag each;
+/// empty when `near` is): cells 3 voxels wide, a bit each, those around a point's cell marked.
+std::vector<std::uint8_t> triangles_near(const std::vector<std::array<std::int32_t, 3>>& T, const std::vector<Eigen::Vector3d>& home,
+                                         const std::vector<Eigen::Vector3d>& near, double h) {
+    if (near.empty() || home.empty()) return {};
+    Eigen::Vector3d lo = home[0], hi = home[0];
+    for (const auto& p : home) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+    // A mesh far larger than its voxels (which the cap of 2^27 cells keeps to 16 MiB of bits) gets wider cells.
+    const Eigen::Vector3d extent = (hi - lo).cwiseMax(0.0);
+    const double side = std::max(3 * h, std::cbrt(extent.prod() / double(std::uint64_t(1) << 27))) * (1 + 1e-9);
+    const std::array<std::int64_t, 3> n{std::int64_t(extent.x() / side) + 1, std::int64_t(extent.y() / side) + 1, std::int64_t(extent.z() / side) + 1};
+    auto cell = [&](const Eigen::Vector3d& p, int a) { return std::int64_t(std::floor((p[a] - lo[a]) / side)); };
+    std::vector<std::uint64_t> bits(std::size_t((n[0] * n[1] * n[2] + 63) / 64), 0);
+    for (const auto& p : near) {
+        const std::array<std::int64_t, 3> c{cell(p, 0), cell(p, 1), cell(p, 2)};
+        for (std::int64_t z = std::max<std::int64_t>(0, c[2] - 1); z <= std::min(n[2] - 1, c[2] + 1); ++z)
+            for (std::int64_t y = std::max<std::int64_t>(0, c[1] - 1); y <= std::min(n[1] - 1, c[1] + 1); ++y)
+                for (std::int64_t x = std::max<std::int64_t>(0, c[0] - 1); x <= std::min(n[0] - 1, c[0] + 1); ++x) {
+                    const std::uint64_t b = std::uint64_t(x + n[0] * (y + n[1] * z));
+                    bits[b / 64] |= std::uint64_t(1) << (b % 64);
+                }
+    }
+    std::vector<std::uint8_t> close(home.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, home.size(), 4096), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v) {
+            const std::uint64_t b = std::uint64_t(cell(home[v], 0) + n[0] * (cell(home[v], 1) + n[1] * cell(home[v], 2)));
+            close[v] = std::uint8_t(bits[b / 64] >> (b % 64) & 1);
+        }
+    });
+    std::vector<std::uint8_t> searched(T.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, T.size(), 4096), [&](const auto& r) {
+        for (std::size_t f = r.begin(); f != r.end(); ++f) searched[f] = close[std::size_t(T[f][0])] | close[std::size_t(T[f][1])] | close[std::size_t(T[f][2])];
+    });
+    return searched;
+}
+
 /// Passes of put_back_crossings that put back one corner of each crossing pair.
 constexpr int kFarthestPasses = 16;
 
@@ -2191,11 +2231,11 @@ constexpr int kFarthestPasses = 16;
 /// twice as many vertices off the exact surface (bunny ear edit at 128: 23 against 12; the snowden scan: 277
 /// against 199). After kFarthestPasses passes (the bundled edits need at most 8) every corner of a pair still
 /// crossing goes back, so that no output needs many more. Returns the vertices put back.
-std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, double h) {
+std::size_t put_back_crossings(TriangleMesh& output, const std::vector<Eigen::Vector3d>& home, const std::vector<Eigen::Vector3d>& near, double h) {
     auto& P = output.vertices;
     const auto& T = output.triangles;
     if (T.size() < 2) return 0;
-    const CrossingIndex index(output, home, h);
+    const CrossingIndex index(output, home, triangles_near(T, home, near, h), h);
     std::size_t back = 0;
     std::vector<char> moved(P.size(), 0);
     std::vector<std::uint32_t> marked; // after the first pass, the triangles around a vertex put back
@@ -2244,7 +2284,7 @@ SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, con
     report.refined = refine_with(output, sources, input, steps, options, refine_options, std::move(sheets), home.empty() ? nullptr : &home);
     report.snapped += report.refined;
     if (!home.empty()) {
-        report.put_back = put_back_crossings(output, home, options.voxel_size);
+        report.put_back = put_back_crossings(output, home, refine_options.crossings_near, options.voxel_size);
         report.snapped -= std::min(report.snapped, report.put_back);
         report.unsnapped += report.put_back;
     }
