@@ -603,7 +603,13 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     for (std::size_t i = 0; i < ntr; ++i)
         for (int c = 0; c < 3; ++c) region_triangles[i][std::size_t(c)] = local_of[std::size_t(mesh.triangles[region[i]][std::size_t(c)])];
     for (Fan& fan : fans) {
-        for (auto& f : fan.triangles) f = std::uint32_t(std::lower_bound(region.begin(), region.end(), f) - region.begin());
+        bool inside = true; // always, as the region holds every fan's cells; were one outside, the fan is dropped
+        for (auto& f : fan.triangles) {
+            const auto at = std::lower_bound(region.begin(), region.end(), f);
+            inside &= at != region.end() && *at == f;
+            f = std::uint32_t(at - region.begin());
+        }
+        if (!inside) fan.cycle.clear();
         for (auto& v : fan.cycle) v = local_of[std::size_t(v)];
     }
 

@@ -144,8 +144,8 @@ public:
         for (const Item& item : items_) for_cells(item, [&](std::size_t b, std::size_t l) { ++offsets_[std::size_t(slot[b]) * BlockGrid::kCells + l + 1]; });
         for (std::size_t i = 1; i < offsets_.size(); ++i) offsets_[i] += offsets_[i - 1];
         ids_.resize(offsets_.back());
-        // Each cell's place in ids_ advanced past its ids as they go in, then put back a cell later: no second
-        // array of offsets (at 256 they take 4 MiB, whose fresh pages cost more than the filing).
+        // Each cell's place in ids_ advanced past its ids as they go in, then shifted back a cell: no second
+        // array as large as the offsets (fresh pages, which cost more than the filing).
         for (const Item& item : items_) for_cells(item, [&](std::size_t b, std::size_t l) { ids_[offsets_[std::size_t(slot[b]) * BlockGrid::kCells + l]++] = item.id; });
         for (std::size_t i = offsets_.size() - 1; i > 0; --i) offsets_[i] = offsets_[i - 1];
         offsets_[0] = 0;
