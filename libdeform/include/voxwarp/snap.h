@@ -115,7 +115,8 @@ struct RefineOptions {
     /// Where crossings may start (world units), for put_back_crossings: given any, only the triangles with a corner
     /// within 3 voxels of one (where extraction made it) are searched. The feature mesher's pairs all lay within
     /// 0.8 voxel of a vertex it made off the grid's edges (a fan's centre, a split, a crossing moved onto the input's
-    /// surface): 7 bundled edits at 64, 128 and 256, 1,600 pairs. Empty: the whole output.
+    /// surface): 7 bundled edits at 64, 128 and 256, 1,600 pairs. The bunny ear's search then takes 35-42 ms at
+    /// 256 against 126-128 over the whole output, and 74-86 ms at 512 against 487-506. Empty: the whole output.
     std::vector<Eigen::Vector3d> crossings_near;
 };
 
