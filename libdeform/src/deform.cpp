@@ -526,19 +526,6 @@ SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions
     return voxelize_sparse(mesh, vo);
 }
 
-/// The vertices of `mesh` not on an edge of the voxmap's grid (two index coordinates whole, to round-off): those
-/// the feature mesher made or moved, around which snapping's crossing search runs (RefineOptions::crossings_near).
-std::vector<Eigen::Vector3d> off_grid_vertices(const TriangleMesh& mesh, const SparseVoxmap& voxmap) {
-    std::vector<Eigen::Vector3d> off;
-    for (const auto& p : mesh.vertices) {
-        const Eigen::Vector3d q = voxmap.index_of(p);
-        int whole = 0;
-        for (int a = 0; a < 3; ++a) whole += std::abs(q[a] - std::round(q[a])) < 1e-5;
-        if (whole < 2) off.push_back(p);
-    }
-    return off;
-}
-
 TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report,
                               const SourceSurface* surface = nullptr) {
     report.mode = "volume";

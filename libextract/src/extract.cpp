@@ -79,4 +79,12 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
     return mesh;
 }
 
+std::vector<Eigen::Vector3d> off_grid_vertices(const TriangleMesh& mesh, const SparseVoxmap& voxmap) {
+    const std::vector<std::uint32_t> off =
+        extract_internal::select_in_parallel(mesh.vertices.size(), [&](std::size_t v) { return !extract_internal::on_grid_edge(voxmap, mesh.vertices[v]); });
+    std::vector<Eigen::Vector3d> points(off.size());
+    for (std::size_t i = 0; i < off.size(); ++i) points[i] = mesh.vertices[off[i]];
+    return points;
+}
+
 } // namespace voxwarp

@@ -224,10 +224,7 @@ std::vector<std::uint32_t> unfold(const std::vector<Eigen::Vector3d>& vertices, 
             if (known(normals, v)) m += normals[std::size_t(v)];
         return m;
     };
-    auto folded = [&](const Triangle& t) {
-        const Eigen::Vector3d m = reference({t[0], t[1], t[2]});
-        return !m.isZero() && !(area_normal(vertices, t).dot(m) > 0);
-    };
+    auto folded = [&](const Triangle& t) { return faces_against(vertices, t, reference({t[0], t[1], t[2]})); };
     const std::vector<std::uint32_t> bad = select_in_parallel(triangles.size(), [&](std::size_t i) { return folded(triangles[i]); });
     std::vector<std::uint32_t> rewritten;
     if (bad.empty()) return rewritten;

@@ -232,6 +232,8 @@ private:
 
 } // namespace
 
+bool on_grid_edge(const SparseVoxmap& voxmap, const Eigen::Vector3d& p) { return edge_of(voxmap, p).axis >= 0; }
+
 TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options) {
     const double h = voxmap.voxel_size();
     const double cos_feature = std::cos(options.feature_angle * M_PI / 180.0);
@@ -570,9 +572,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             Eigen::Vector3d reference = Eigen::Vector3d::Zero();
             bool moved = false;
             for (const auto v : t) reference += normal_at(std::size_t(v)), moved |= (flags[std::size_t(v)] & kMoved) != 0;
-            const Eigen::Vector3d& a = mesh.vertices[std::size_t(t[0])];
-            const bool folded = !reference.isZero() && !((mesh.vertices[std::size_t(t[1])] - a).cross(mesh.vertices[std::size_t(t[2])] - a).dot(reference) > 0);
-            changed[k] = moved || folded ? cell_key(home_cell(t)) : kNone;
+            changed[k] = moved || faces_against(mesh.vertices, t, reference) ? cell_key(home_cell(t)) : kNone;
         }
     });
     for (const std::uint64_t key : candidate_cells) changed.push_back(key);

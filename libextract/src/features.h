@@ -176,6 +176,16 @@ private:
     std::vector<std::uint32_t> ids_;
 };
 
+/// Whether triangle t of `v` faces against `reference`, the sum of its corners' known normals (zero: none known):
+/// folded over in the plane of a face. unfold() flips such triangles, and restore_features() builds around them.
+inline bool faces_against(const std::vector<Eigen::Vector3d>& v, const std::array<std::int32_t, 3>& t, const Eigen::Vector3d& reference) {
+    const Eigen::Vector3d& a = v[std::size_t(t[0])];
+    return !reference.isZero() && !((v[std::size_t(t[1])] - a).cross(v[std::size_t(t[2])] - a).dot(reference) > 0);
+}
+
+/// Whether `p` lies on an edge of the voxmap's grid (or a node), to round-off: every vertex of marching cubes does.
+bool on_grid_edge(const SparseVoxmap& voxmap, const Eigen::Vector3d& p);
+
 /// `mesh`, marching cubes' output for `voxmap` (every vertex on a grid edge, every triangle in one cell), with
 /// the cells that hold a sharp part re-meshed as fans around their feature points and those points joined.
 TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options);

@@ -59,4 +59,9 @@ TriangleMesh extract(const Voxmap& voxmap, const ExtractOptions& options = {});
 /// The same from a block-sparse voxmap: its blocks become the grid's leaves and tiles directly.
 TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options = {});
 
+/// The vertices of `mesh`, extracted from `voxmap`, that lie off the voxmap's grid edges (world units, in vertex
+/// order). Marching cubes puts every vertex on one: these are those the feature mesher made (fans' centres, splits)
+/// or moved onto the input's surface, where its sharp parts are.
+std::vector<Eigen::Vector3d> off_grid_vertices(const TriangleMesh& mesh, const SparseVoxmap& voxmap);
+
 } // namespace voxwarp
