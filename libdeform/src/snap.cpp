@@ -25,6 +25,8 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <deque>
+#include <unordered_map>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -917,6 +919,9 @@ constexpr int kInsertRounds = 8;
 constexpr int kInsertRoundsAlways = 3;
 constexpr std::ptrdiff_t kLatePassPoints = 4096;
 
+/// Sides a segment joining two points of a crease may cross (join_creases): points half a voxel apart cross a few.
+constexpr std::size_t kJoinCrossings = 32;
+
 /// A corner's piece may turn from the neighbour across its side by at most acos(-kCornerFold) (150 degrees).
 constexpr double kCornerFold = 0.866;
 
@@ -1070,6 +1075,21 @@ public:
         const auto first = clamped_cell(lo - grow), last = clamped_cell(hi + grow);
         for (std::int64_t z = first[2]; z <= last[2]; ++z)
             for (std::int64_t y = first[1]; y <= last[1]; ++y) row(y, z, first[0], last[0], [&](const Item& i) { visit(i.f); });
+    }
+
+    /// Calls visit(f) for every triangle f whose ball as filed (its middle, out to its farthest corner) meets the
+    /// box [lo, hi], without reading a corner.
+    template <class Visit>
+    void meeting(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const Visit& visit) const {
+        const Eigen::Vector3d grow = Eigen::Vector3d::Constant(radius_);
+        const auto first = clamped_cell(lo - grow), last = clamped_cell(hi + grow);
+        for (std::int64_t z = first[2]; z <= last[2]; ++z)
+            for (std::int64_t y = first[1]; y <= last[1]; ++y)
+                row(y, z, first[0], last[0], [&](const Item& i) {
+                    const Eigen::Vector3d m = origin_ + Eigen::Vector3d(i.x, i.y, i.z);
+                    const double reach = double(i.r) + slack_;
+                    if ((m.cwiseMax(lo).cwiseMin(hi) - m).squaredNorm() <= reach * reach) visit(i.f);
+                });
     }
 
     /// Calls visit(f) for every triangle f that may lie within `bound` of p, and some others. visit may lower
@@ -1601,6 +1621,305 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
     return selected.size();
 }
 
+/// The output's edges along the input's creases. Points of a crease come into the output put in (insert_points),
+/// split on it (refine_with) or snapped onto a convex ridge, but two that follow each other along it are often not
+/// joined by an edge: the triangles between them cross the crease and cut under it. Of the bunny ear edit's pairs
+/// of crease points put in one after the other at 128, 55 of 251 were joined; joining the others took the bent and
+/// twisted box's edges from p99 0.13-0.17 voxel off the exact warp to 0.05-0.08. Each pair whose segment's middle
+/// lies farther than `chord` from the triangles around its ends is joined by flipping the edges that cross the
+/// segment (Sloan's edge insertion, seen along the mean of the crease's two faces' normals as the maps carry
+/// them), unless the flips leave a triangle without area, turned against that mean (or, where extraction made the
+/// vertices, turned over there: put_back_crossings relies on it), facing away from both faces, folded back onto a
+/// neighbour, or crossing the output. No vertex moves. Returns the pairs joined.
+std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface, const std::vector<WarpStep>& steps,
+                         const OutputIndex& index, const std::vector<Eigen::Vector3d>* home, double h, double chord) {
+    const auto& F = surface.faces;
+    const std::vector<Eigen::Vector3d>& P = output.vertices;
+    auto& T = output.triangles;
+    const double cos_corner = std::cos(kCornerAngle * M_PI / 180.0), tiny = 1e-4 * h * h;
+    using Key = std::uint64_t;
+    auto key = [](std::int32_t a, std::int32_t b) { return Key(std::uint32_t(std::min(a, b))) << 32 | std::uint32_t(std::max(a, b)); };
+    // The input's creases: sides of exactly two faces with area, at more than kCornerAngle (feature_points' test).
+    std::vector<std::pair<Key, std::uint32_t>> sides;
+    for (std::size_t f = 0; f < F.size(); ++f)
+        if (!surface.normal[f].isZero())
+            for (int k = 0; k < 3; ++k) sides.push_back({key(F[f][std::size_t(k)], F[f][std::size_t((k + 1) % 3)]), std::uint32_t(f)});
+    std::sort(sides.begin(), sides.end());
+    struct Crease {
+        Key edge;
+        std::uint32_t f, g;
+    };
+    std::vector<Crease> creases;
+    for (std::size_t i = 0, j = 0; i < sides.size(); i = j) {
+        while (j < sides.size() && sides[j].first == sides[i].first) ++j;
+        if (j - i == 2 && surface.normal[sides[i].second].dot(surface.normal[sides[i + 1].second]) < cos_corner)
+            creases.push_back({sides[i].first, sides[i].second, sides[i + 1].second});
+    }
+    if (creases.empty()) return 0;
+    const Adjacency at_vertex(surface.V.size(), [&](auto visit) { // input vertex -> its creases
+        for (std::size_t c = 0; c < creases.size(); ++c)
+            visit(std::size_t(creases[c].edge >> 32), std::uint32_t(c)), visit(std::size_t(creases[c].edge & 0xffffffffu), std::uint32_t(c));
+    });
+    auto crease_of = [&](Key k) -> std::int64_t {
+        const auto it = std::lower_bound(creases.begin(), creases.end(), k, [](const Crease& c, Key x) { return c.edge < x; });
+        return it != creases.end() && it->edge == k ? it - creases.begin() : -1;
+    };
+    // The output's vertices on a crease (their sources on its side, or at one of its ends), by crease and along it.
+    constexpr double kOnSide = 1e-7; // a barycentric weight this small puts a source on the side
+    struct On {
+        std::uint32_t crease;
+        double t; ///< from the crease's lower input vertex
+        std::int32_t v;
+        bool operator<(const On& o) const { return crease < o.crease || (crease == o.crease && (t < o.t || (t == o.t && v < o.v))); }
+    };
+    std::vector<On> on;
+    for (std::size_t v = 0; v < sources.size() && v < P.size(); ++v) {
+        const SourcePoint& s = sources[v];
+        if (s.face < 0) continue;
+        const auto& t = F[std::size_t(s.face)];
+        int zeros = 0, zero = 0, one = 0;
+        for (int k = 0; k < 3; ++k) {
+            if (s.barycentric[k] < kOnSide) ++zeros, zero = k;
+            if (s.barycentric[k] > s.barycentric[one]) one = k;
+        }
+        if (zeros == 1) {
+            const std::int32_t a = t[std::size_t((zero + 1) % 3)], b = t[std::size_t((zero + 2) % 3)];
+            if (const std::int64_t c = crease_of(key(a, b)); c >= 0)
+                on.push_back({std::uint32_t(c), a < b ? s.barycentric[(zero + 2) % 3] : s.barycentric[(zero + 1) % 3], std::int32_t(v)});
+        } else if (zeros == 2) {
+            const auto w = std::size_t(t[std::size_t(one)]);
+            for (const std::uint32_t* c = at_vertex.begin(w); c != at_vertex.end(w); ++c)
+                on.push_back({*c, std::size_t(creases[*c].edge >> 32) == w ? 0.0 : 1.0, std::int32_t(v)});
+        }
+    }
+    std::sort(on.begin(), on.end());
+
+    // The rings of the vertices whose triangles the flips changed (the others: the index's), and what a pair's flips
+    // changed, to undo them.
+    std::vector<std::int32_t> ring_slot(P.size(), -1);
+    std::vector<std::vector<std::uint32_t>> rings;
+    auto ring = [&](std::int32_t v) -> std::pair<const std::uint32_t*, const std::uint32_t*> {
+        if (const std::int32_t slot = ring_slot[std::size_t(v)]; slot >= 0) {
+            const auto& r = rings[std::size_t(slot)];
+            return {r.data(), r.data() + r.size()};
+        }
+        return index.ring(std::size_t(v));
+    };
+    std::vector<std::pair<std::uint32_t, std::array<std::int32_t, 3>>> undo_triangles;
+    std::vector<std::pair<std::int32_t, std::vector<std::uint32_t>>> undo_rings; // (vertex, its ring before)
+    auto own_ring = [&](std::int32_t v) -> std::vector<std::uint32_t>& {
+        std::int32_t& slot = ring_slot[std::size_t(v)];
+        if (slot < 0) {
+            const auto [b, e] = index.ring(std::size_t(v));
+            slot = std::int32_t(rings.size());
+            rings.emplace_back(b, e);
+            undo_rings.push_back({v, rings.back()});
+        } else if (std::none_of(undo_rings.begin(), undo_rings.end(), [&](const auto& u) { return u.first == v; })) {
+            undo_rings.push_back({v, rings[std::size_t(slot)]});
+        }
+        return rings[std::size_t(slot)];
+    };
+    auto undo = [&] {
+        for (auto it = undo_triangles.rbegin(); it != undo_triangles.rend(); ++it) T[it->first] = it->second;
+        for (auto& [v, before] : undo_rings) rings[std::size_t(ring_slot[std::size_t(v)])] = std::move(before);
+        return false;
+    };
+    auto has = [](const std::array<std::int32_t, 3>& t, std::int32_t v) { return std::find(t.begin(), t.end(), v) != t.end(); };
+    auto joined = [&](std::int32_t a, std::int32_t b) {
+        const auto [begin, end] = ring(a);
+        return std::any_of(begin, end, [&](std::uint32_t f) { return has(T[f], b); });
+    };
+    // The triangle with side x -> y (f), and its third corner (-1: none).
+    auto with_side = [&](std::int32_t x, std::int32_t y, std::uint32_t& f) -> std::int32_t {
+        const auto [begin, end] = ring(x);
+        for (const std::uint32_t* g = begin; g != end; ++g)
+            for (int k = 0; k < 3; ++k)
+                if (T[*g][std::size_t(k)] == x && T[*g][std::size_t((k + 1) % 3)] == y) return f = *g, T[*g][std::size_t((k + 2) % 3)];
+        return -1;
+    };
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& X) {
+        return Eigen::Vector3d((X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]));
+    };
+    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
+    auto box_of = [&](const std::array<std::int32_t, 3>& t) {
+        const Eigen::Vector3d &p = P[std::size_t(t[0])], &q = P[std::size_t(t[1])], &r = P[std::size_t(t[2])];
+        return Box{p.cwiseMin(q).cwiseMin(r), p.cwiseMax(q).cwiseMax(r)};
+    };
+    auto meet = [](const Box& x, const Box& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); };
+    auto at = [&](std::int32_t v) -> const Eigen::Vector3d& { return P[std::size_t(v)]; };
+    // Whether s lies on one side of t's plane (normal n), but for the corners it shares with t: then they do not cross.
+    auto apart = [&](const std::array<std::int32_t, 3>& s, const std::array<std::int32_t, 3>& t, const Eigen::Vector3d& n) {
+        int above = 0, below = 0, own = 0;
+        for (const std::int32_t c : s) {
+            if (has(t, c)) continue;
+            ++own;
+            const double d = n.dot(P[std::size_t(c)] - P[std::size_t(t[0])]);
+            above += d > 0, below += d < 0;
+        }
+        return own > 0 && (above == own || below == own);
+    };
+    // The triangles flipped so far, filed by the cells (two voxels wide) their boxes meet: the index has them where
+    // they were. A linked list per cell.
+    const double cell = 2 * h;
+    auto each_cell = [&](const Box& b, const auto& visit) {
+        const Eigen::Vector3d lo = (b.first / cell).array().floor(), hi = (b.second / cell).array().floor();
+        for (double z = lo.z(); z <= hi.z(); ++z)
+            for (double y = lo.y(); y <= hi.y(); ++y)
+                for (double x = lo.x(); x <= hi.x(); ++x)
+                    visit(std::uint64_t(std::int64_t(x) & 0x1fffff) << 42 | std::uint64_t(std::int64_t(y) & 0x1fffff) << 21 | std::uint64_t(std::int64_t(z) & 0x1fffff));
+    };
+    std::unordered_map<std::uint64_t, std::uint32_t> flipped_head;  // cell -> its last entry in flipped + 1 (0: none)
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> flipped;    // (triangle, the cell's entry before it + 1)
+    std::vector<std::pair<std::uint32_t, Box>> near;                  // the triangles a join's may cross, and their boxes
+
+    // Joins a to b, seen along N; false (nothing changed) where it cannot soundly.
+    auto join = [&](std::int32_t a, std::int32_t b, const Eigen::Vector3d& N, const std::array<Eigen::Vector3d, 2>& exact) {
+        const Eigen::Vector3d u = N.unitOrthogonal(), w = N.cross(u);
+        auto orient = [&](std::int32_t p, std::int32_t q, std::int32_t r) {
+            const Eigen::Vector3d d1 = P[std::size_t(q)] - P[std::size_t(p)], d2 = P[std::size_t(r)] - P[std::size_t(p)];
+            return d1.dot(u) * d2.dot(w) - d1.dot(w) * d2.dot(u);
+        };
+        // The sides the segment a-b crosses, x on its right and y on its left: from the one triangle around a
+        // (facing along N) whose corner at a holds the direction to b, across to b.
+        std::vector<std::pair<std::int32_t, std::int32_t>> crossed;
+        {
+            const auto [begin, end] = ring(a);
+            for (const std::uint32_t* f = begin; f != end; ++f) {
+                const auto& t = T[*f];
+                int k = 0;
+                while (t[std::size_t(k)] != a) ++k;
+                const std::int32_t x = t[std::size_t((k + 1) % 3)], y = t[std::size_t((k + 2) % 3)];
+                if (orient(a, x, y) > 0 && orient(a, x, b) > 0 && orient(a, b, y) > 0) crossed.push_back({x, y});
+            }
+        }
+        if (crossed.size() != 1) return false;
+        for (;;) {
+            if (crossed.size() > kJoinCrossings) return false;
+            const auto [x, y] = crossed.back();
+            std::uint32_t g;
+            const std::int32_t z = with_side(y, x, g);
+            if (z < 0) return false;
+            if (z == b) break;
+            const double s = orient(a, b, z);
+            if (s == 0) return false;
+            crossed.push_back(s < 0 ? std::pair{z, y} : std::pair{x, z});
+        }
+        // Flip each crossed side whose two triangles make a convex quad as seen, until none crosses the segment.
+        undo_triangles.clear(), undo_rings.clear();
+        std::deque<std::pair<std::int32_t, std::int32_t>> queue(crossed.begin(), crossed.end());
+        std::vector<std::uint32_t> changed;
+        for (std::size_t tries = 0; !queue.empty() && tries < 16 * crossed.size(); ++tries) {
+            const auto [x, y] = queue.front();
+            queue.pop_front();
+            std::uint32_t f1 = 0, f2 = 0;
+            const std::int32_t p = with_side(x, y, f1), q = with_side(y, x, f2);
+            if (p < 0 || q < 0) break;
+            if (!(orient(p, q, x) * orient(p, q, y) < 0 && orient(x, y, p) * orient(x, y, q) < 0) || joined(p, q)) {
+                queue.push_back({x, y});
+                continue;
+            }
+            auto drop = [&](std::int32_t v, std::uint32_t f) {
+                auto& r = own_ring(v);
+                r.erase(std::remove(r.begin(), r.end(), f), r.end());
+            };
+            drop(x, f2), drop(y, f1), own_ring(p).push_back(f2), own_ring(q).push_back(f1);
+            undo_triangles.push_back({f1, T[f1]}), undo_triangles.push_back({f2, T[f2]});
+            T[f1] = {x, q, p}, T[f2] = {q, y, p};
+            changed.push_back(f1), changed.push_back(f2);
+            if (p != a && p != b && q != a && q != b && orient(a, b, p) * orient(a, b, q) < 0 && orient(p, q, a) * orient(p, q, b) < 0) queue.push_back({p, q});
+        }
+        if (!queue.empty() || !joined(a, b)) return undo();
+        std::sort(changed.begin(), changed.end());
+        changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
+        // In 3D: area, facing, at home too, and folds with the neighbours.
+        Box reach = box_of(T[changed[0]]);
+        for (const std::uint32_t f : changed) {
+            const auto& t = T[f];
+            const Eigen::Vector3d n = normal_of(t, P);
+            if (!(n.norm() > tiny && n.dot(N) > 0 && (n.dot(exact[0]) > 0 || n.dot(exact[1]) > 0))) return undo();
+            if (home && !(normal_of(t, *home).dot(N) > 0)) return undo();
+            for (int k = 0; k < 3; ++k) {
+                std::uint32_t g;
+                if (with_side(t[std::size_t((k + 1) % 3)], t[std::size_t(k)], g) < 0) return undo();
+                if (!(n.normalized().dot(normal_of(T[g], P).normalized()) > -kCornerFold)) return undo();
+            }
+            const Box b = box_of(t);
+            reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
+        }
+        // Crossings, against the triangles filed near and those flipped near.
+        near.clear();
+        auto consider = [&](std::uint32_t g) {
+            if (const Box b = box_of(T[g]); meet(b, reach)) near.push_back({g, b});
+        };
+        index.meeting(reach.first, reach.second, consider);
+        each_cell(reach, [&](std::uint64_t k) {
+            if (const auto it = flipped_head.find(k); it != flipped_head.end())
+                for (std::uint32_t e = it->second; e != 0; e = flipped[e - 1].second) consider(flipped[e - 1].first);
+        });
+        for (const std::uint32_t f : changed) {
+            const Box b = box_of(T[f]);
+            const Eigen::Vector3d n = normal_of(T[f], P);
+            for (const auto& [g, gb] : near)
+                if (g != f && meet(gb, b) && !apart(T[g], T[f], n) && triangles_cross(at, T[f], T[g])) return undo();
+        }
+        for (const std::uint32_t f : changed)
+            each_cell(box_of(T[f]), [&](std::uint64_t k) {
+                std::uint32_t& head = flipped_head[k];
+                flipped.push_back({f, head});
+                head = std::uint32_t(flipped.size());
+            });
+        return true;
+    };
+
+    // The pairs to join: not joined yet, and their segment's middle farther than the chord from the triangles
+    // around them (where the crease is cut under), with the normals of the crease's faces there as the maps carry
+    // them. Joined in the order of their middles' cells along a Morton curve, each reading much of what the one
+    // before read (at 256, a fifth faster than in the creases' order).
+    struct Pair {
+        std::uint64_t order;
+        std::int32_t a, b;
+        std::array<Eigen::Vector3d, 2> exact;
+    };
+    std::vector<Pair> pairs = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, on.size() > 0 ? on.size() - 1 : 0, 1024), std::vector<Pair>(),
+        [&](const auto& r, std::vector<Pair> found) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                if (on[i].crease != on[i + 1].crease) continue;
+                const std::int32_t a = on[i].v, b = on[i + 1].v;
+                if ((P[std::size_t(a)] - P[std::size_t(b)]).norm() < 1e-3 * h || joined(a, b)) continue; // (one point: fans' centres at a corner)
+                const Eigen::Vector3d m = 0.5 * (P[std::size_t(a)] + P[std::size_t(b)]);
+                double nearest = std::numeric_limits<double>::infinity();
+                for (const std::int32_t v : {a, b}) {
+                    const auto [begin, end] = ring(v);
+                    for (const std::uint32_t* f = begin; f != end; ++f) {
+                        const auto& t = T[*f];
+                        const Eigen::Vector3d c = closest_barycentric(m, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
+                        nearest = std::min(nearest, (c[0] * P[std::size_t(t[0])] + c[1] * P[std::size_t(t[1])] + c[2] * P[std::size_t(t[2])] - m).norm());
+                    }
+                }
+                if (nearest <= chord) continue;
+                const Crease& crease = creases[std::size_t(on[i].crease)];
+                const Eigen::Vector3d lo = surface.V[crease.edge >> 32], hi = surface.V[crease.edge & 0xffffffffu];
+                const auto exact = push_normals<2>(steps, lo + 0.5 * (on[i].t + on[i + 1].t) * (hi - lo), {surface.normal[crease.f], surface.normal[crease.g]});
+                const Eigen::Vector3d c = (m / (4 * h)).array().floor();
+                std::uint64_t order = 0;
+                for (int bit = 20; bit >= 0; --bit)
+                    for (int axis = 2; axis >= 0; --axis) order = order << 1 | (std::uint64_t(std::int64_t(c[axis]) & 0x1fffff) >> bit & 1);
+                found.push_back({order, a, b, exact});
+            }
+            return found;
+        },
+        concat<Pair>);
+    std::stable_sort(pairs.begin(), pairs.end(), [](const Pair& x, const Pair& y) { return x.order < y.order; });
+    std::size_t count = 0;
+    for (const Pair& pair : pairs) {
+        const Eigen::Vector3d N = (pair.exact[0].normalized() + pair.exact[1].normalized()).normalized();
+        if (!N.allFinite() || joined(pair.a, pair.b)) continue;
+        if (join(pair.a, pair.b, N, pair.exact) || join(pair.b, pair.a, N, pair.exact)) ++count;
+    }
+    return count;
+}
+
 /// refine_to_sources, its first round with `first` (computed when empty).
 std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
                  const SnapOptions& options, const RefineOptions& refine, Sheets first, std::vector<Eigen::Vector3d>* home = nullptr) {
@@ -2011,6 +2330,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
             if (more == 0) break;
             if (round + 1 >= kInsertRoundsAlways && std::count(settled.begin(), settled.end(), 0) > kLatePassPoints) break;
         }
+        join_creases(output, sources, surface, steps, index, home, h, chord);
     }
     return added;
 }
