@@ -25,13 +25,13 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
-#include <deque>
-#include <unordered_map>
 #include <cmath>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <numeric>
 #include <optional>
+#include <unordered_map>
 
 namespace voxwarp {
 
@@ -1625,7 +1625,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
 /// split on it (refine_with) or snapped onto a convex ridge, but two that follow each other along it are often not
 /// joined by an edge: the triangles between them cross the crease and cut under it. Of the bunny ear edit's pairs
 /// of crease points put in one after the other at 128, 55 of 251 were joined; joining the others took the bent and
-/// twisted box's edges from p99 0.13-0.17 voxel off the exact warp to 0.05-0.08. Each pair whose segment's middle
+/// twisted box's edges from p99 0.067-0.168 voxel off the exact warp to 0.041-0.059. Each pair whose segment's middle
 /// lies farther than `chord` from the triangles around its ends is joined by flipping the edges that cross the
 /// segment (Sloan's edge insertion, seen along the mean of the crease's two faces' normals as the maps carry
 /// them), unless the flips leave a triangle without area, turned against that mean (or, where extraction made the
@@ -1771,6 +1771,9 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
     std::unordered_map<std::uint64_t, std::uint32_t> flipped_head;  // cell -> its last entry in flipped + 1 (0: none)
     std::vector<std::pair<std::uint32_t, std::uint32_t>> flipped;    // (triangle, the cell's entry before it + 1)
     std::vector<std::pair<std::uint32_t, Box>> near;                  // the triangles a join's may cross, and their boxes
+    std::vector<std::pair<std::int32_t, std::int32_t>> crossed;       // (kept from join to join: no allocation per join)
+    std::deque<std::pair<std::int32_t, std::int32_t>> queue;
+    std::vector<std::uint32_t> changed;
 
     // Joins a to b, seen along N; false (nothing changed) where it cannot soundly.
     auto join = [&](std::int32_t a, std::int32_t b, const Eigen::Vector3d& N, const std::array<Eigen::Vector3d, 2>& exact) {
@@ -1781,7 +1784,7 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
         };
         // The sides the segment a-b crosses, x on its right and y on its left: from the one triangle around a
         // (facing along N) whose corner at a holds the direction to b, across to b.
-        std::vector<std::pair<std::int32_t, std::int32_t>> crossed;
+        crossed.clear();
         {
             const auto [begin, end] = ring(a);
             for (const std::uint32_t* f = begin; f != end; ++f) {
@@ -1806,8 +1809,8 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
         }
         // Flip each crossed side whose two triangles make a convex quad as seen, until none crosses the segment.
         undo_triangles.clear(), undo_rings.clear();
-        std::deque<std::pair<std::int32_t, std::int32_t>> queue(crossed.begin(), crossed.end());
-        std::vector<std::uint32_t> changed;
+        queue.assign(crossed.begin(), crossed.end());
+        changed.clear();
         for (std::size_t tries = 0; !queue.empty() && tries < 16 * crossed.size(); ++tries) {
             const auto [x, y] = queue.front();
             queue.pop_front();
