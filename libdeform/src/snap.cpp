@@ -1625,8 +1625,8 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
 /// split on it (refine_with) or snapped onto a convex ridge, but two that follow each other along it are often not
 /// joined by an edge: the triangles between them cross the crease and cut under it. Of the bunny ear edit's pairs
 /// of crease points put in one after the other at 128, 55 of 251 were joined; joining the others took the bent and
-/// twisted box's edges from p99 0.067-0.168 voxel off the exact warp to 0.041-0.059. Each pair whose segment's middle
-/// lies farther than `chord` from the triangles around its ends is joined by flipping the edges that cross the
+/// twisted box's edges from p99 0.067-0.168 voxel off the exact warp to 0.041-0.059. Each pair, both on the exact
+/// surface, whose segment's middle lies farther than `chord` from the triangles around its ends is joined by flipping the edges that cross the
 /// segment (Sloan's edge insertion, seen along the mean of the crease's two faces' normals as the maps carry
 /// them), unless the flips leave a triangle without area, turned against that mean (or, where extraction made the
 /// vertices, turned over there: put_back_crossings relies on it), facing away from both faces, folded back onto a
@@ -1901,6 +1901,10 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
                     }
                 }
                 if (nearest <= chord) continue;
+                // Both on the exact surface: a vertex left where extraction made it (or moved part of the way) keeps
+                // its source, but does not lie on the crease.
+                auto on_image = [&](std::int32_t v) { return (push_forward(steps, surface.position(sources[std::size_t(v)])) - P[std::size_t(v)]).norm() <= 1e-6 * h; };
+                if (!on_image(a) || !on_image(b)) continue;
                 const Crease& crease = creases[std::size_t(on[i].crease)];
                 const Eigen::Vector3d lo = surface.V[crease.edge >> 32], hi = surface.V[crease.edge & 0xffffffffu];
                 const auto exact = push_normals<2>(steps, lo + 0.5 * (on[i].t + on[i + 1].t) * (hi - lo), {surface.normal[crease.f], surface.normal[crease.g]});
