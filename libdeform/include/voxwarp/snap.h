@@ -134,13 +134,13 @@ struct RefineOptions {
 /// long), the output's triangles still cut under them: each such point whose exact image lies more than
 /// chord_voxels and at most 1.5 voxels from the output goes in, splitting the nearest triangle into three (or its
 /// nearest side, both triangles into two), unless a piece would turn over, fold back onto a neighbour, or cross
-/// the output (thin parts included: a rim's tip may go in). Last, two vertices that follow each other along a
-/// crease (their sources on it) but are not joined, where the middle between them lies more than chord_voxels off
-/// the triangles around them, are joined by flipping the edges between them, unless a triangle would turn over,
-/// fold or cross the output: the output's edges then run along the creases (the bent and twisted box's edges: p99
-/// 0.041-0.059 voxel off the exact warp, 0.067-0.168 before). `sources` grows with the vertices. A mesh with quads
-/// is left as it is. Parallel (oneTBB); the answer does not depend on the thread count. Returns the number of
-/// vertices added.
+/// the output (thin parts included: a rim's tip may go in). Last, two vertices on the exact surface that follow
+/// each other along a crease (their sources on it) but are not joined, where the middle between them lies more
+/// than chord_voxels off the triangles around them, are joined by flipping the edges between them, unless a
+/// triangle would turn over, fold or cross the output: the output's edges then run along the creases (the bent
+/// and twisted box's edges: p99 0.041-0.059 voxel off the exact warp, 0.067-0.168 before). `sources` grows with
+/// the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on the thread
+/// count. Returns the number of vertices added.
 std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
                               const SnapOptions& options, const RefineOptions& refine = {});
 
