@@ -947,6 +947,43 @@ struct FeaturePoint {
     SourcePoint source;
 };
 
+/// The input's faces with area around each of its vertices.
+Adjacency faces_with_area(const SourceSurface::Impl& surface) {
+    return Adjacency(surface.V.size(), [&](auto visit) {
+        for (std::size_t f = 0; f < surface.faces.size(); ++f)
+            if (!surface.normal[f].isZero())
+                for (const auto v : surface.faces[f]) visit(std::size_t(v), std::uint32_t(f));
+    });
+}
+
+/// A crease of the input: side (first, second), first < second, of face f, shared with exactly one other face g
+/// (both with area), their normals more than kCornerAngle apart.
+struct Crease {
+    std::int32_t first, second;
+    std::uint32_t f, g;
+};
+
+/// The input's creases, each once from the face that has it running from its lower vertex to its higher, in the
+/// faces' order (feature_points and join_creases). `around`: faces_with_area(surface).
+std::vector<Crease> input_creases(const SourceSurface::Impl& surface, const Adjacency& around) {
+    const double cos_corner = std::cos(kCornerAngle * M_PI / 180.0);
+    const auto& F = surface.faces;
+    std::vector<Crease> creases;
+    for (std::size_t f = 0; f < F.size(); ++f) {
+        if (surface.normal[f].isZero()) continue;
+        for (int k = 0; k < 3; ++k) {
+            const std::int32_t first = F[f][std::size_t(k)], second = F[f][std::size_t((k + 1) % 3)];
+            if (first > second) continue;
+            std::int64_t g = -1;
+            int sharing = 0;
+            for (const std::uint32_t* q = around.begin(std::size_t(first)); q != around.end(std::size_t(first)); ++q)
+                if (*q != f && std::find(F[*q].begin(), F[*q].end(), second) != F[*q].end()) g = *q, ++sharing;
+            if (sharing == 1 && surface.normal[f].dot(surface.normal[std::size_t(g)]) < cos_corner) creases.push_back({first, second, std::uint32_t(f), std::uint32_t(g)});
+        }
+    }
+    return creases;
+}
+
 /// The input's corners (vertices whose faces' normals spread by more than kCornerAngle) and points along its creases
 /// (edges whose faces meet at more than that), half a voxel apart after `steps`, where the faces are large enough to
 /// matter at voxel size `h`: a corner with an edge half a voxel long, a crease half a voxel long.
@@ -954,11 +991,7 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
     const double cos_corner = std::cos(kCornerAngle * M_PI / 180.0);
     const auto& F = surface.faces;
     const auto& V = surface.V;
-    const Adjacency around(V.size(), [&](auto visit) { // vertex -> its faces with area
-        for (std::size_t f = 0; f < F.size(); ++f)
-            if (!surface.normal[f].isZero())
-                for (const auto v : F[f]) visit(std::size_t(v), std::uint32_t(f));
-    });
+    const Adjacency around = faces_with_area(surface);
     auto slot = [&](std::uint32_t f, std::size_t v) { // barycentric weights of vertex v in face f
         Eigen::Vector3d b = Eigen::Vector3d::Zero();
         for (int k = 0; k < 3; ++k) b[k] = std::size_t(F[f][std::size_t(k)]) == v ? 1.0 : 0.0;
@@ -982,33 +1015,20 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
         p.source.barycentric = slot(fs[0], v);
         points.push_back(p);
     }
-    // Creases: sides (first, second) of face f with first < second, shared with exactly one other face g.
-    for (std::size_t f = 0; f < F.size(); ++f) {
-        if (surface.normal[f].isZero()) continue;
-        for (int k = 0; k < 3; ++k) {
-            const std::int32_t first = F[f][std::size_t(k)], second = F[f][std::size_t((k + 1) % 3)];
-            if (first > second) continue; // each side once, from the face that has it this way round
-            std::int64_t g = -1;
-            int sharing = 0;
-            for (const std::uint32_t* q = around.begin(std::size_t(first)); q != around.end(std::size_t(first)); ++q)
-                if (*q != f && std::find(F[*q].begin(), F[*q].end(), second) != F[*q].end()) g = *q, ++sharing;
-            if (sharing != 1 || surface.normal[f].dot(surface.normal[std::size_t(g)]) >= cos_corner) continue;
-            const std::array<std::uint32_t, 2> fs{std::uint32_t(f), std::uint32_t(g)};
-            const std::pair<std::int32_t, std::int32_t> edge{first, second};
-            const Eigen::Vector3d a = V[std::size_t(edge.first)], b = V[std::size_t(edge.second)];
-            // Half a voxel apart where the map has taken the crease (an edit may stretch it).
-            const double length = steps.empty() ? (b - a).norm() : (push_forward(steps, b) - push_forward(steps, a)).norm();
-            const int samples = int(std::min(1000.0, std::floor(length / (kCreaseSpacing * h))));
-            for (int j = 1; j <= samples; ++j) {
-                const double t = double(j) / (samples + 1);
-                FeaturePoint p;
-                p.at = (1 - t) * a + t * b;
-                p.count = 2;
-                p.faces = {fs[0], fs[1]};
-                p.source.face = std::int32_t(fs[0]);
-                p.source.barycentric = (1 - t) * slot(fs[0], std::size_t(edge.first)) + t * slot(fs[0], std::size_t(edge.second));
-                points.push_back(p);
-            }
+    for (const Crease& crease : input_creases(surface, around)) {
+        const Eigen::Vector3d a = V[std::size_t(crease.first)], b = V[std::size_t(crease.second)];
+        // Half a voxel apart where the map has taken the crease (an edit may stretch it).
+        const double length = steps.empty() ? (b - a).norm() : (push_forward(steps, b) - push_forward(steps, a)).norm();
+        const int samples = int(std::min(1000.0, std::floor(length / (kCreaseSpacing * h))));
+        for (int j = 1; j <= samples; ++j) {
+            const double t = double(j) / (samples + 1);
+            FeaturePoint p;
+            p.at = (1 - t) * a + t * b;
+            p.count = 2;
+            p.faces = {crease.f, crease.g};
+            p.source.face = std::int32_t(crease.f);
+            p.source.barycentric = (1 - t) * slot(crease.f, std::size_t(crease.first)) + t * slot(crease.f, std::size_t(crease.second));
+            points.push_back(p);
         }
     }
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024), [&](const auto& r) {
@@ -1636,33 +1656,21 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
     const auto& F = surface.faces;
     const std::vector<Eigen::Vector3d>& P = output.vertices;
     auto& T = output.triangles;
-    const double cos_corner = std::cos(kCornerAngle * M_PI / 180.0), tiny = 1e-4 * h * h;
+    const double tiny = 1e-4 * h * h;
     using Key = std::uint64_t;
     auto key = [](std::int32_t a, std::int32_t b) { return Key(std::uint32_t(std::min(a, b))) << 32 | std::uint32_t(std::max(a, b)); };
-    // The input's creases: sides of exactly two faces with area, at more than kCornerAngle (feature_points' test).
-    std::vector<std::pair<Key, std::uint32_t>> sides;
-    for (std::size_t f = 0; f < F.size(); ++f)
-        if (!surface.normal[f].isZero())
-            for (int k = 0; k < 3; ++k) sides.push_back({key(F[f][std::size_t(k)], F[f][std::size_t((k + 1) % 3)]), std::uint32_t(f)});
-    std::sort(sides.begin(), sides.end());
-    struct Crease {
-        Key edge;
-        std::uint32_t f, g;
-    };
-    std::vector<Crease> creases;
-    for (std::size_t i = 0, j = 0; i < sides.size(); i = j) {
-        while (j < sides.size() && sides[j].first == sides[i].first) ++j;
-        if (j - i == 2 && surface.normal[sides[i].second].dot(surface.normal[sides[i + 1].second]) < cos_corner)
-            creases.push_back({sides[i].first, sides[i].second, sides[i + 1].second});
-    }
+    // The creases by their sides (a side twice only where the faces' orientations disagree: once).
+    std::vector<Crease> creases = input_creases(surface, faces_with_area(surface));
+    auto side_key = [&](const Crease& c) { return key(c.first, c.second); };
+    std::stable_sort(creases.begin(), creases.end(), [&](const Crease& x, const Crease& y) { return side_key(x) < side_key(y); });
+    creases.erase(std::unique(creases.begin(), creases.end(), [&](const Crease& x, const Crease& y) { return side_key(x) == side_key(y); }), creases.end());
     if (creases.empty()) return 0;
     const Adjacency at_vertex(surface.V.size(), [&](auto visit) { // input vertex -> its creases
-        for (std::size_t c = 0; c < creases.size(); ++c)
-            visit(std::size_t(creases[c].edge >> 32), std::uint32_t(c)), visit(std::size_t(creases[c].edge & 0xffffffffu), std::uint32_t(c));
+        for (std::size_t c = 0; c < creases.size(); ++c) visit(std::size_t(creases[c].first), std::uint32_t(c)), visit(std::size_t(creases[c].second), std::uint32_t(c));
     });
     auto crease_of = [&](Key k) -> std::int64_t {
-        const auto it = std::lower_bound(creases.begin(), creases.end(), k, [](const Crease& c, Key x) { return c.edge < x; });
-        return it != creases.end() && it->edge == k ? it - creases.begin() : -1;
+        const auto it = std::lower_bound(creases.begin(), creases.end(), k, [&](const Crease& c, Key x) { return side_key(c) < x; });
+        return it != creases.end() && side_key(*it) == k ? it - creases.begin() : -1;
     };
     // The output's vertices on a crease (their sources on its side, or at one of its ends), by crease and along it.
     constexpr double kOnSide = 1e-7; // a barycentric weight this small puts a source on the side
@@ -1689,7 +1697,7 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
         } else if (zeros == 2) {
             const auto w = std::size_t(t[std::size_t(one)]);
             for (const std::uint32_t* c = at_vertex.begin(w); c != at_vertex.end(w); ++c)
-                on.push_back({*c, std::size_t(creases[*c].edge >> 32) == w ? 0.0 : 1.0, std::int32_t(v)});
+                on.push_back({*c, std::size_t(creases[*c].first) == w ? 0.0 : 1.0, std::int32_t(v)});
         }
     }
     std::sort(on.begin(), on.end());
@@ -1896,8 +1904,7 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
                     const auto [begin, end] = ring(v);
                     for (const std::uint32_t* f = begin; f != end; ++f) {
                         const auto& t = T[*f];
-                        const Eigen::Vector3d c = closest_barycentric(m, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]);
-                        nearest = std::min(nearest, (c[0] * P[std::size_t(t[0])] + c[1] * P[std::size_t(t[1])] + c[2] * P[std::size_t(t[2])] - m).norm());
+                        nearest = std::min(nearest, (internal::closest_on_triangle(m, P[std::size_t(t[0])], P[std::size_t(t[1])], P[std::size_t(t[2])]) - m).norm());
                     }
                 }
                 if (nearest <= chord) continue;
@@ -1906,7 +1913,7 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
                 auto on_image = [&](std::int32_t v) { return (push_forward(steps, surface.position(sources[std::size_t(v)])) - P[std::size_t(v)]).norm() <= 1e-6 * h; };
                 if (!on_image(a) || !on_image(b)) continue;
                 const Crease& crease = creases[std::size_t(on[i].crease)];
-                const Eigen::Vector3d lo = surface.V[crease.edge >> 32], hi = surface.V[crease.edge & 0xffffffffu];
+                const Eigen::Vector3d lo = surface.V[std::size_t(crease.first)], hi = surface.V[std::size_t(crease.second)];
                 const auto exact = push_normals<2>(steps, lo + 0.5 * (on[i].t + on[i + 1].t) * (hi - lo), {surface.normal[crease.f], surface.normal[crease.g]});
                 const Eigen::Vector3d c = (m / (4 * h)).array().floor();
                 std::uint64_t order = 0;
