@@ -565,6 +565,7 @@ bool steep_at_corners(const Eigen::Vector3d& n, const std::array<std::int32_t, 3
 struct Sheets {
     std::vector<Eigen::Vector3d> normal; ///< vertex_normals
     std::vector<std::int32_t> partner;   ///< other_sheet within 1.5 voxels
+    std::vector<std::int32_t> left;      ///< the vertices of faces that snapping left where extraction made them
 };
 
 /// `normal`: vertex_normals(output), or empty (worked out here).
@@ -839,7 +840,12 @@ SnapReport snap(TriangleMesh& output, const TriangleMesh& input, const std::vect
             ++report.unsnapped;
         }
     }
-    if (keep) keep->normal = std::move(normal), keep->partner = std::move(partner);
+    if (keep) {
+        keep->normal = std::move(normal), keep->partner = std::move(partner);
+        keep->left.clear();
+        for (std::size_t v = 0; v < n; ++v)
+            if (!snapped[v] && in_face[v] && target[v].allFinite() && sources[v].face >= 0) keep->left.push_back(std::int32_t(v));
+    }
     return report;
 }
 
@@ -1158,12 +1164,13 @@ public:
         stale_.resize(T.size(), 0);
         std::vector<std::pair<std::int32_t, std::uint32_t>> corners; // (vertex, changed triangle), by vertex
         for (const std::uint32_t f : changed) {
-            if (!stale_[f]) stale_[f] = 1, moved_.push_back(f);
+            stale_[f] = 1;
             for (const std::int32_t v : T[f]) corners.push_back({v, f});
         }
         std::sort(corners.begin(), corners.end());
         std::vector<std::uint32_t> sorted(changed);
         std::sort(sorted.begin(), sorted.end());
+        sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
         for (std::size_t i = 0; i < corners.size();) {
             const std::int32_t v = corners[i].first;
             const auto [b, e] = ring(std::size_t(v));
@@ -1174,9 +1181,15 @@ public:
             if (patch_[std::size_t(v)] < 0) patch_[std::size_t(v)] = std::int32_t(patches_.size()), patches_.emplace_back();
             patches_[std::size_t(patch_[std::size_t(v)])] = std::move(list);
         }
-        extra_.clear();
-        for (const std::uint32_t f : moved_) extra_.push_back(filed(output, f)), radius_ = std::max(radius_, double(extra_.back().second.r));
-        std::sort(extra_.begin(), extra_.end(), [](const Filed& a, const Filed& b) { return a.first < b.first || (a.first == b.first && a.second.f < b.second.f); });
+        // Only the changed triangles are filed anew: their old entries out, theirs merged in (refiling every moved
+        // triangle each time cost step 8 a few milliseconds a pass at 256).
+        auto before = [](const Filed& a, const Filed& b) { return a.first < b.first || (a.first == b.first && a.second.f < b.second.f); };
+        extra_.erase(std::remove_if(extra_.begin(), extra_.end(), [&](const Filed& i) { return std::binary_search(sorted.begin(), sorted.end(), i.second.f); }),
+                     extra_.end());
+        const std::size_t kept = extra_.size();
+        for (const std::uint32_t f : sorted) extra_.push_back(filed(output, f)), radius_ = std::max(radius_, double(extra_.back().second.r));
+        std::sort(extra_.begin() + std::ptrdiff_t(kept), extra_.end(), before);
+        std::inplace_merge(extra_.begin(), extra_.begin() + std::ptrdiff_t(kept), extra_.end(), before);
     }
 
 private:
@@ -1256,7 +1269,6 @@ private:
     std::vector<std::int32_t> patch_;                ///< per vertex: its ring in patches_, or -1 (base_)
     std::vector<std::vector<std::uint32_t>> patches_;
     std::vector<char> stale_;                         ///< per triangle: filed in extra_, not items_
-    std::vector<std::uint32_t> moved_;
 };
 
 /// Up to N items in place (a split's triangles and pieces: no allocation per point).
@@ -1267,6 +1279,8 @@ struct Few {
     Few() = default;
     Few(std::initializer_list<Item> list) : count(list.size()) { std::copy(list.begin(), list.end(), items.begin()); }
     std::size_t size() const { return count; }
+    bool empty() const { return count == 0; }
+    void push_back(const Item& item) { items[count++] = item; }
     Item* begin() { return items.data(); }
     Item* end() { return items.data() + count; }
     const Item* begin() const { return items.data(); }
@@ -1652,7 +1666,7 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
 /// vertices, turned over there: put_back_crossings relies on it), facing away from both faces, folded back onto a
 /// neighbour, or crossing the output. No vertex moves. Returns the pairs joined.
 std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface, const std::vector<WarpStep>& steps,
-                         const OutputIndex& index, const std::vector<Eigen::Vector3d>* home, double h, double chord) {
+                         OutputIndex& index, const std::vector<Eigen::Vector3d>* home, double h, double chord) {
     const auto& F = surface.faces;
     const std::vector<Eigen::Vector3d>& P = output.vertices;
     auto& T = output.triangles;
@@ -1931,12 +1945,366 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
         if (!N.allFinite() || joined(pair.a, pair.b)) continue;
         if (join(pair.a, pair.b, N, pair.exact) || join(pair.b, pair.a, N, pair.exact)) ++count;
     }
+    // The index, up to date for step 8: the triangles flipped here.
+    std::vector<std::uint32_t> flips;
+    for (const auto& entry : flipped) flips.push_back(entry.first);
+    std::sort(flips.begin(), flips.end());
+    flips.erase(std::unique(flips.begin(), flips.end()), flips.end());
+    if (!flips.empty()) index.update(output, flips);
     return count;
+}
+
+/// Step 8 tries to flip a triangle whose corners' normals, one less the cosine of each's angle to the exact normal
+/// there, add up to more than this (three corners 33 degrees off, or one 66).
+constexpr double kOffNormals = 0.6;
+/// Rounds of steps 7b and 8 (snap_again, flip_to_normals) at most.
+constexpr int kAgainRounds = 3;
+
+/// Step 8: flips sides where the triangles on either side turn from the exact surface. With every vertex on the
+/// exact warp, the triangulation can still cut under it: a triangle from one face of a sharp crease to the other
+/// (the ear's rim, 0.37 voxel under the exact warp), or one folded flat onto its neighbours (an in-plane fold, as
+/// the feature mesher leaves some where fans of its corners meet at an edge or a tip). A triangle's misfit is its
+/// area times, summed over its corners, one less the cosine of the angle between its normal and the exact normal
+/// there nearest it (the normals of the faces at the corner's source, as the maps carry them: two or more on a
+/// crease or corner). Two triangles trade their shared side for the other diagonal where that lowers their misfit
+/// by a tenth, neither new one faces against the exact normal at every corner or has next to no area, and neither
+/// crosses a triangle near it. Returns the flips made.
+std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
+                            const std::vector<WarpStep>& steps, OutputIndex& index, const std::vector<Eigen::Vector3d>* home, double h,
+                            const std::vector<std::uint32_t>* only = nullptr) {
+    const auto& P = output.vertices;
+    auto& T = output.triangles;
+    if (!output.quads.empty() || T.empty() || sources.size() != P.size()) return 0;
+    auto normal_of_at = [](const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& X) {
+        return Eigen::Vector3d((X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]));
+    };
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return normal_of_at(t, P); };
+    // Cheap first: a triangle that meets a neighbour at more than kSteep (a fold, or one across a crease, or on
+    // either side of one); only those are judged by their sources. `only`: these triangles instead. (Vertex
+    // normals would do, but an array of them is megabytes of fresh pages: 40 ms at 256.)
+    std::vector<std::uint32_t> suspects;
+    if (only) {
+        suspects = *only;
+    } else {
+        // Each side once, from the triangle that has it running from its lower corner to its higher.
+        suspects = tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, T.size(), 8192), std::vector<std::uint32_t>(),
+            [&](const auto& r, std::vector<std::uint32_t> found) {
+                for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+                    for (int k = 0; k < 3; ++k) {
+                        const std::int32_t a = T[f][std::size_t(k)], b = T[f][std::size_t((k + 1) % 3)];
+                        if (a > b) continue;
+                        if (n.isZero()) n = normal_of(T[f]);
+                        const auto [begin, end] = index.ring(std::size_t(a));
+                        for (const std::uint32_t* q = begin; q != end; ++q)
+                            if (*q != f && std::find(T[*q].begin(), T[*q].end(), b) != T[*q].end()) {
+                                const Eigen::Vector3d m = normal_of(T[*q]);
+                                if (n.dot(m) < kSteep * n.norm() * m.norm()) found.push_back(std::uint32_t(f)), found.push_back(*q);
+                                break;
+                            }
+                    }
+                }
+                return found;
+            },
+            concat<std::uint32_t>);
+        tbb::parallel_sort(suspects.begin(), suspects.end());
+        suspects.erase(std::unique(suspects.begin(), suspects.end()), suspects.end());
+    }
+    if (suspects.empty()) return 0;
+    // The exact normals at a vertex: of the faces at its source point (one inside a face, those sharing a side or a
+    // corner), pushed forward; none without a source. Worked out once each.
+    const Adjacency input_rings = faces_with_area(surface);
+    using Normals = Few<Eigen::Vector3d, FeaturePoint::kFaces>;
+    std::unordered_map<std::int32_t, Normals> exact;
+    auto exact_at = [&](std::int32_t v) -> const Normals& {
+        auto [it, fresh] = exact.try_emplace(v);
+        const SourcePoint& s = sources[std::size_t(v)];
+        if (!fresh || s.face < 0) return it->second;
+        const auto& F = surface.faces;
+        std::array<Eigen::Vector3d, FeaturePoint::kFaces> n{};
+        std::size_t count = 0;
+        n[count++] = surface.normal[std::size_t(s.face)];
+        // The faces with area at each corner of the source's face its weights reach; those that hold the point.
+        const Eigen::Vector3d x = surface.position(s);
+        for (int k = 0; k < 3; ++k) {
+            if (s.barycentric[(k + 1) % 3] > 0 && s.barycentric[(k + 2) % 3] > 0) continue; // not at corner k's side or corner
+            const std::size_t corner = std::size_t(F[std::size_t(s.face)][std::size_t(k)]);
+            for (const std::uint32_t* g = input_rings.begin(corner); g != input_rings.end(corner) && count < n.size(); ++g) {
+                if (std::int32_t(*g) == s.face) continue;
+                const auto& t = F[*g];
+                if ((internal::closest_on_triangle(x, surface.V[std::size_t(t[0])], surface.V[std::size_t(t[1])], surface.V[std::size_t(t[2])]) - x).norm() > 1e-9 * h) continue;
+                bool known = false;
+                for (std::size_t j = 0; j < count; ++j) known |= n[j].dot(surface.normal[*g]) > 1 - 1e-12;
+                if (!known) n[count++] = surface.normal[*g];
+            }
+        }
+        n = push_normals<FeaturePoint::kFaces>(steps, x, n);
+        for (std::size_t j = 0; j < count; ++j)
+            if (!n[j].isZero()) it->second.push_back(n[j]);
+        return it->second;
+    };
+    const double tiny = 1e-6 * h * h;
+    // Per corner, one less the cosine to the nearest exact normal; a corner without one counts nothing.
+    auto misfit = [&](const std::array<std::int32_t, 3>& t) {
+        const Eigen::Vector3d n = normal_of(t);
+        const double area = n.norm();
+        if (area == 0) return 0.0;
+        double sum = 0;
+        for (const auto c : t) {
+            double best = -1;
+            for (const auto& m : exact_at(c)) best = std::max(best, n.dot(m) / area);
+            if (!exact_at(c).empty()) sum += 1 - best;
+        }
+        return 0.5 * area * sum;
+    };
+    auto against = [&](const std::array<std::int32_t, 3>& t) {
+        const Eigen::Vector3d n = normal_of(t);
+        return std::all_of(t.begin(), t.end(), [&](std::int32_t c) {
+            return !exact_at(c).empty() && std::all_of(exact_at(c).begin(), exact_at(c).end(), [&](const Eigen::Vector3d& m) { return n.dot(m) < 0; });
+        });
+    };
+    // Worth a try: off the exact normals by more than kSteep at a corner (misfit over 0.3 of its area there).
+    auto off = [&](const std::array<std::int32_t, 3>& t) { return misfit(t) > kOffNormals * 0.5 * normal_of(t).norm(); };
+    std::vector<std::uint32_t> folds;
+    for (const std::uint32_t f : suspects)
+        if (off(T[f])) folds.push_back(f);
+    if (folds.empty()) return 0;
+    // The triangles around each vertex: the index's, and those a flip in this pass changed kept apart.
+    std::unordered_map<std::int32_t, std::vector<std::uint32_t>> changed;
+    auto ring = [&](std::int32_t v) -> std::pair<const std::uint32_t*, const std::uint32_t*> {
+        if (auto it = changed.find(v); it != changed.end()) return {it->second.data(), it->second.data() + it->second.size()};
+        return index.ring(std::size_t(v));
+    };
+    auto own = [&](std::int32_t v) -> std::vector<std::uint32_t>& {
+        auto [it, fresh] = changed.try_emplace(v);
+        if (fresh) {
+            const auto [b, e] = index.ring(std::size_t(v));
+            it->second.assign(b, e);
+        }
+        return it->second;
+    };
+    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
+    auto box_of = [&](const std::array<std::int32_t, 3>& t) {
+        Box b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
+        for (int k = 1; k < 3; ++k) b.first = b.first.cwiseMin(P[std::size_t(t[std::size_t(k)])]), b.second = b.second.cwiseMax(P[std::size_t(t[std::size_t(k)])]);
+        return b;
+    };
+    auto meet = [](const Box& x, const Box& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); };
+    std::vector<std::uint32_t> flipped; // in this pass (the index files them where they were)
+    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
+    std::vector<std::uint32_t> near;
+    std::size_t flips = 0;
+    for (int pass = 0; pass < 16 && !folds.empty(); ++pass) {
+        const std::size_t before = flips;
+        std::vector<std::uint32_t> left;
+        for (const std::uint32_t f : folds) {
+            if (!off(T[f])) continue; // a flip next to it mended it
+            // The sides whose flips lower the misfit, most first; the first that crosses nothing.
+            struct Flip {
+                double gain;
+                std::uint32_t g;
+                std::array<std::int32_t, 3> one, two;
+            };
+            Few<Flip, 3> flips_of_f;
+            for (int k = 0; k < 3; ++k) {
+                const std::int32_t a = T[f][std::size_t(k)], b = T[f][std::size_t((k + 1) % 3)], c = T[f][std::size_t((k + 2) % 3)];
+                // The triangle with side b -> a, and its third corner d.
+                std::int64_t g = -1;
+                std::int32_t d = -1;
+                const auto [b0, e0] = ring(a);
+                for (const std::uint32_t* q = b0; q != e0 && g < 0; ++q)
+                    for (int j = 0; j < 3; ++j)
+                        if (T[*q][std::size_t(j)] == b && T[*q][std::size_t((j + 1) % 3)] == a) g = *q, d = T[*q][std::size_t((j + 2) % 3)];
+                if (g < 0 || d == c) continue;
+                const auto [b1, e1] = ring(c);
+                if (std::any_of(b1, e1, [&](std::uint32_t q) { return std::find(T[q].begin(), T[q].end(), d) != T[q].end(); })) continue; // c-d is a side already
+                const std::array<std::int32_t, 3> one{c, a, d}, two{d, b, c};
+                if (normal_of(one).norm() <= tiny || normal_of(two).norm() <= tiny || against(one) || against(two)) continue;
+                const double was = misfit(T[f]) + misfit(T[std::size_t(g)]), now = misfit(one) + misfit(two);
+                if (!(now < 0.9 * was)) continue;
+                // Seen along the exact normals at the four corners, both new triangles turn the right way: then they
+                // lie on either side of their shared side and cover what the two they replace did (less any fold).
+                Eigen::Vector3d N = Eigen::Vector3d::Zero();
+                for (const std::int32_t v : {a, b, c, d})
+                    for (const auto& m : exact_at(v)) N += m;
+                if (!(normal_of(one).dot(N) > 0 && normal_of(two).dot(N) > 0)) continue;
+                // Facing along N at home too, where put_back_crossings may take the corners back.
+                if (home && !(normal_of_at(one, *home).dot(N) > 0 && normal_of_at(two, *home).dot(N) > 0)) continue;
+                flips_of_f.push_back({was - now, std::uint32_t(g), one, two});
+            }
+            std::sort(flips_of_f.begin(), flips_of_f.end(), [](const Flip& x, const Flip& y) { return x.gain > y.gain; });
+            double gain = 0;
+            std::uint32_t best_g = 0;
+            std::array<std::int32_t, 3> best_one{}, best_two{};
+            for (const Flip& flip : flips_of_f) {
+                const std::array<std::int32_t, 3>&one = flip.one, &two = flip.two;
+                const std::int32_t c = one[0], d = one[2];
+                // Not folded back onto a neighbour across an old side (by more than 150 degrees).
+                auto folds_back = [&](const std::array<std::int32_t, 3>& t) {
+                    const Eigen::Vector3d n = normal_of(t).normalized();
+                    for (int j = 0; j < 3; ++j) {
+                        const std::int32_t x = t[std::size_t(j)], y = t[std::size_t((j + 1) % 3)];
+                        if ((x == c && y == d) || (x == d && y == c)) continue;
+                        const auto [bx, ex] = ring(x);
+                        for (const std::uint32_t* q = bx; q != ex; ++q)
+                            if (*q != f && *q != flip.g && std::find(T[*q].begin(), T[*q].end(), y) != T[*q].end() &&
+                                !(n.dot(normal_of(T[*q]).normalized()) > -kCornerFold) && !against(T[*q]))
+                                return true;
+                    }
+                    return false;
+                };
+                if (folds_back(one) || folds_back(two)) continue;
+                // Not through a triangle near it: those the index files near, and those flipped in this pass.
+                const Box box1 = box_of(one), box2 = box_of(two);
+                const Box reach{box1.first.cwiseMin(box2.first), box1.second.cwiseMax(box2.second)};
+                near.clear();
+                index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
+                for (const std::uint32_t q : flipped)
+                    if (meet(box_of(T[q]), reach)) near.push_back(q);
+                const bool crosses = std::any_of(near.begin(), near.end(), [&](std::uint32_t q) {
+                    if (q == f || q == flip.g) return false;
+                    const Box bq = box_of(T[q]);
+                    return (meet(bq, box1) && triangles_cross(at, one, T[q])) || (meet(bq, box2) && triangles_cross(at, two, T[q]));
+                });
+                if (crosses) continue;
+                gain = flip.gain, best_g = flip.g, best_one = one, best_two = two;
+                break;
+            }
+            if (gain == 0) {
+                left.push_back(f);
+                continue;
+            }
+            const std::int32_t a = best_one[1], b = best_two[1], c = best_one[0], d = best_one[2];
+            T[f] = best_one;
+            T[best_g] = best_two;
+            auto drop = [&](std::int32_t v, std::uint32_t t) { auto& r = own(v); r.erase(std::remove(r.begin(), r.end(), t), r.end()); };
+            drop(a, best_g);
+            drop(b, f);
+            own(c).push_back(best_g);
+            own(d).push_back(f);
+            flipped.push_back(f), flipped.push_back(best_g);
+            ++flips;
+        }
+        if (flips == before) break;
+        // The next pass: what is still off among the triangles flipped and those around their corners (one that
+        // failed with nothing changed around it fails again).
+        std::sort(flipped.begin(), flipped.end());
+        flipped.erase(std::unique(flipped.begin(), flipped.end()), flipped.end());
+        left.clear();
+        for (const std::uint32_t f : flipped)
+            for (const std::int32_t c : T[f]) {
+                const auto [b, e] = ring(c);
+                for (const std::uint32_t* q = b; q != e; ++q)
+                    if (off(T[*q])) left.push_back(*q);
+            }
+        index.update(output, flipped);
+        flipped.clear();
+        changed.clear();
+        std::sort(left.begin(), left.end());
+        left.erase(std::unique(left.begin(), left.end()), left.end());
+        folds = std::move(left);
+    }
+    return flips;
+}
+
+/// Step 7b: the vertices snapping left where extraction made them (step 3) try again, one at a time, now that
+/// refinement has put the input's creases in around them: where several of a face's corners had their sources on
+/// one crease (the rim of a thin part the warp's carry thickens), moving them all together collapsed the face,
+/// and each alone folded it with the others still off; they stayed up to half a voxel outside the exact warp (the
+/// bunny ear's worst place, 0.35 voxel). A vertex moves onto its image (half a voxel toward one up to a voxel
+/// away) where no triangle around it turns over, collapses, or faces against the exact normal at each of its
+/// corners, and none crosses a triangle near it. Returns the vertices moved.
+std::vector<Eigen::Vector3d> targets_again(const TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
+                                           const std::vector<WarpStep>& steps, const std::vector<std::int32_t>& left, double max_move) {
+    const auto& P = output.vertices;
+    std::vector<Eigen::Vector3d> target(left.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, left.size(), 256), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            const std::size_t v = std::size_t(left[i]);
+            Eigen::Vector3d x = push_forward(steps, surface.position(sources[v]));
+            const double d = (x - P[v]).norm();
+            if (!x.allFinite() || d > kPartReach * max_move) x = P[v];
+            else if (d > max_move) x = P[v] + (max_move / d) * (x - P[v]);
+            target[i] = x;
+        }
+    });
+    return target;
+}
+
+std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
+                                      const std::vector<WarpStep>& steps, const std::vector<std::int32_t>& left, const std::vector<Eigen::Vector3d>& target,
+                                      OutputIndex& index, double h, std::size_t& count) {
+    auto& P = output.vertices;
+    const auto& T = output.triangles;
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return Eigen::Vector3d((P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])])); };
+    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
+    auto box_of = [&](const std::array<std::int32_t, 3>& t) {
+        Box b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
+        for (int k = 1; k < 3; ++k) b.first = b.first.cwiseMin(P[std::size_t(t[std::size_t(k)])]), b.second = b.second.cwiseMax(P[std::size_t(t[std::size_t(k)])]);
+        return b;
+    };
+    auto meet = [](const Box& x, const Box& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); };
+    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
+    auto exact_normal = [&](std::int32_t v) {
+        const SourcePoint& s = sources[std::size_t(v)];
+        return s.face < 0 ? Eigen::Vector3d::Zero() : push_normal(steps, surface.position(s), surface.normal[std::size_t(s.face)]);
+    };
+    const double tiny = 1e-4 * h * h;
+    std::vector<std::uint32_t> moved; // triangles around a vertex moved (the index files them where they were)
+    std::vector<std::uint32_t> near;
+    for (std::size_t i = 0; i < left.size(); ++i) {
+        const std::int32_t v = left[i];
+        if ((target[i] - P[std::size_t(v)]).norm() <= 1e-6 * h) continue; // there already
+        const auto [begin, end] = index.ring(std::size_t(v));
+        if (begin == end) continue;
+        std::vector<Eigen::Vector3d> before;
+        for (const std::uint32_t* f = begin; f != end; ++f) before.push_back(normal_of(T[*f]));
+        const Eigen::Vector3d from = P[std::size_t(v)];
+        P[std::size_t(v)] = target[i];
+        bool fine = true;
+        Box reach = box_of(T[*begin]);
+        for (const std::uint32_t* f = begin; f != end && fine; ++f) {
+            const Eigen::Vector3d n = normal_of(T[*f]);
+            fine = n.norm() > tiny && n.dot(before[std::size_t(f - begin)]) > 0;
+            // Not facing against the exact normal at every corner.
+            bool along = false;
+            for (const std::int32_t c : T[*f]) along |= n.dot(exact_normal(c)) > 0;
+            fine = fine && along;
+            const Box b = box_of(T[*f]);
+            reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
+        }
+        if (fine) {
+            near.clear();
+            index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
+            for (const std::uint32_t q : moved)
+                if (meet(box_of(T[q]), reach)) near.push_back(q);
+            for (const std::uint32_t* f = begin; f != end && fine; ++f) {
+                const Box b = box_of(T[*f]);
+                for (const std::uint32_t q : near)
+                    if (std::find(begin, end, q) == end && meet(box_of(T[q]), b) && triangles_cross(at, T[*f], T[q])) {
+                        fine = false;
+                        break;
+                    }
+            }
+        }
+        if (!fine) {
+            P[std::size_t(v)] = from;
+            continue;
+        }
+        ++count;
+        moved.insert(moved.end(), begin, end);
+    }
+    std::sort(moved.begin(), moved.end());
+    moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
+    if (!moved.empty()) index.update(output, moved);
+    return moved;
 }
 
 /// refine_to_sources, its first round with `first` (computed when empty).
 std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
-                 const SnapOptions& options, const RefineOptions& refine, Sheets first, std::vector<Eigen::Vector3d>* home = nullptr) {
+                 const SnapOptions& options, const RefineOptions& refine, Sheets first, std::vector<Eigen::Vector3d>* home = nullptr,
+                 std::size_t* snapped_again = nullptr) {
     check_options(options);
     if (sources.size() != output.vertices.size())
         throw InvalidInput("refine: " + std::to_string(sources.size()) + " source points for " + std::to_string(output.vertices.size()) + " vertices");
@@ -2333,6 +2701,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
             }
         }
     }
+    const std::vector<std::int32_t> left = std::move(first.left);
     first = Sheets{}; // step 6 needs neither (6 MB at 256 off the peak)
     if (refine.rounds > 0) {
         const std::vector<FeaturePoint> points = feature_points(surface, steps, h);
@@ -2345,6 +2714,18 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
             if (round + 1 >= kInsertRoundsAlways && std::count(settled.begin(), settled.end(), 0) > kLatePassPoints) break;
         }
         join_creases(output, sources, surface, steps, index, home, h, chord);
+        // Steps 7b and 8 in turn: the flips around a vertex that could not move may let it move next time.
+        const std::vector<Eigen::Vector3d> target = targets_again(output, sources, surface, steps, left, max_move);
+        std::size_t again = 0;
+        for (int round = 0; round < kAgainRounds; ++round) {
+            const std::size_t was = again;
+            const std::vector<std::uint32_t> moved = snap_again(output, sources, surface, steps, left, target, index, h, again);
+            if (round > 0 && again == was) break;
+            // The first round looks at the whole output; later ones around the vertices the last one moved.
+            flip_to_normals(output, sources, surface, steps, index, home, h, round == 0 ? nullptr : &moved);
+            if (again == was) break;
+        }
+        if (snapped_again) *snapped_again = again;
     }
     return added;
 }
@@ -2615,8 +2996,10 @@ SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, con
     std::vector<Eigen::Vector3d> home;
     if (refine_options.put_back_crossings && output.quads.empty()) home = output.vertices;
     SnapReport report = snap(output, input.mesh(), steps, sources, options, &sheets, std::move(normal));
-    report.refined = refine_with(output, sources, input, steps, options, refine_options, std::move(sheets), home.empty() ? nullptr : &home);
-    report.snapped += report.refined;
+    std::size_t again = 0;
+    report.refined = refine_with(output, sources, input, steps, options, refine_options, std::move(sheets), home.empty() ? nullptr : &home, &again);
+    report.snapped += report.refined + again;
+    report.unsnapped -= std::min(report.unsnapped, again);
     if (!home.empty()) {
         report.put_back = put_back_crossings(output, home, refine_options.crossings_near, options.voxel_size);
         report.snapped -= std::min(report.snapped, report.put_back);

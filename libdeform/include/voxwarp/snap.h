@@ -138,15 +138,22 @@ struct RefineOptions {
 /// each other along a crease (their sources on it) but are not joined, where the middle between them lies more
 /// than chord_voxels off the triangles around them, are joined by flipping the edges between them, unless a
 /// triangle would turn over, fold or cross the output: the output's edges then run along the creases (the bent
-/// and twisted box's edges: p99 0.041-0.059 voxel off the exact warp, 0.067-0.168 before). `sources` grows with
-/// the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on the thread
+/// and twisted box's edges: p99 0.041-0.059 voxel off the exact warp, 0.067-0.168 before). Then two triangles whose
+/// normals turn from the exact normals at their corners (the normals of the faces at each corner's source, as the
+/// maps carry them) trade their shared side for the other diagonal where that turns them less, both face along the
+/// exact normals and neither crosses the output: a triangle from one face of a sharp crease to the other stops
+/// cutting under it, and a triangle folded flat onto its neighbours unfolds (the box's edges: p99 0.002-0.027).
+/// `sources` grows with the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on the thread
 /// count. Returns the number of vertices added.
 std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
                               const SnapOptions& options, const RefineOptions& refine = {});
 
 /// snap_to_sources, then refine_to_sources with what snapping found out about the output's sheets (the deform's
 /// path: refinement then costs its splits alone). Empty `sources` are found first (find_sources), the output's
-/// vertex normals worked out once for both.
+/// vertex normals worked out once for both. Before the last flips, the vertices snapping left where they were try
+/// again, one at a time, against the refined output (where a face's corners all had their sources on one crease,
+/// moving them together collapsed it); with a flip around one, up to three times. The report counts those moved
+/// among the snapped.
 SnapReport snap_and_refine(TriangleMesh& output, const SourceSurface& input, const std::vector<WarpStep>& steps, std::vector<SourcePoint>& sources,
                            const SnapOptions& options, const RefineOptions& refine = {});
 
