@@ -138,12 +138,13 @@ TEST(KeepsTopology, TheBundledScanEditFollowsTheExactWarpAt64) {
     // exact warp (the lattice map applied to the scan subdivided to a voxel). The scan is a shell about half a voxel
     // thick there; where the carry thickens a wall, the thick side's vertices lie 0.5-1 voxel off the exact warp,
     // beyond a full snap: p99 0.55 before they moved half a voxel toward their images, 0.39 before the shell's faces
-    // were refined (thin parts were left alone); 0.34 since.
+    // were refined (thin parts were left alone); 0.33 before the vertices snapping left behind tried again against
+    // the refined output and sides were flipped toward the exact normals (steps 7b and 8); 0.23 since.
     const auto [out, exact, report, h] = test::deform_with_exact_warp("snowden_lo.obj", "snowden_nose.json", 64);
     const DistanceStats d = one_sided_distance(out, exact);
     std::printf("snowden nose edit at 64, output to exact warp: mean %.3f p99 %.3f voxel; %zu vertices snapped, %zu partly, %zu not\n", d.mean / h,
                 d.p99 / h, report.snapped_vertices, report.partly_snapped_vertices, report.unsnapped_vertices);
-    EXPECT_LE(d.p99 / h, 0.375);
+    EXPECT_LE(d.p99 / h, 0.3);
     EXPECT_GT(report.partly_snapped_vertices, 0u);
     EXPECT_TRUE(topology(out).watertight());
 }
