@@ -1655,6 +1655,23 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
     return selected.size();
 }
 
+/// The box of triangle t's corners in P, and whether two boxes meet (join_creases, flip_to_normals, snap_again).
+using TriangleBox = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
+TriangleBox box_of(const std::vector<Eigen::Vector3d>& P, const std::array<std::int32_t, 3>& t) {
+    const Eigen::Vector3d &p = P[std::size_t(t[0])], &q = P[std::size_t(t[1])], &r = P[std::size_t(t[2])];
+    return {p.cwiseMin(q).cwiseMin(r), p.cwiseMax(q).cwiseMax(r)};
+}
+bool boxes_meet(const TriangleBox& x, const TriangleBox& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); }
+/// Calls visit(key) for each cell (of side `cell`) that box b meets: the keys of a hash grid.
+template <class Visit>
+void each_cell_of(const TriangleBox& b, double cell, const Visit& visit) {
+    const Eigen::Vector3d lo = (b.first / cell).array().floor(), hi = (b.second / cell).array().floor();
+    for (double z = lo.z(); z <= hi.z(); ++z)
+        for (double y = lo.y(); y <= hi.y(); ++y)
+            for (double x = lo.x(); x <= hi.x(); ++x)
+                visit(std::uint64_t(std::int64_t(x) & 0x1fffff) << 42 | std::uint64_t(std::int64_t(y) & 0x1fffff) << 21 | std::uint64_t(std::int64_t(z) & 0x1fffff));
+}
+
 /// The output's edges along the input's creases. Points of a crease come into the output put in (insert_points),
 /// split on it (refine_with) or snapped onto a convex ridge, but two that follow each other along it are often not
 /// joined by an edge: the triangles between them cross the crease and cut under it. Of the bunny ear edit's pairs
@@ -1762,12 +1779,9 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
     auto normal_of = [&](const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& X) {
         return Eigen::Vector3d((X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]));
     };
-    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
-    auto box_of = [&](const std::array<std::int32_t, 3>& t) {
-        const Eigen::Vector3d &p = P[std::size_t(t[0])], &q = P[std::size_t(t[1])], &r = P[std::size_t(t[2])];
-        return Box{p.cwiseMin(q).cwiseMin(r), p.cwiseMax(q).cwiseMax(r)};
-    };
-    auto meet = [](const Box& x, const Box& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); };
+    using Box = TriangleBox;
+    auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
+    auto meet = boxes_meet;
     auto at = [&](std::int32_t v) -> const Eigen::Vector3d& { return P[std::size_t(v)]; };
     // Whether s lies on one side of t's plane (normal n), but for the corners it shares with t: then they do not cross.
     auto apart = [&](const std::array<std::int32_t, 3>& s, const std::array<std::int32_t, 3>& t, const Eigen::Vector3d& n) {
@@ -1783,13 +1797,7 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
     // The triangles flipped so far, filed by the cells (two voxels wide) their boxes meet: the index has them where
     // they were. A linked list per cell.
     const double cell = 2 * h;
-    auto each_cell = [&](const Box& b, const auto& visit) {
-        const Eigen::Vector3d lo = (b.first / cell).array().floor(), hi = (b.second / cell).array().floor();
-        for (double z = lo.z(); z <= hi.z(); ++z)
-            for (double y = lo.y(); y <= hi.y(); ++y)
-                for (double x = lo.x(); x <= hi.x(); ++x)
-                    visit(std::uint64_t(std::int64_t(x) & 0x1fffff) << 42 | std::uint64_t(std::int64_t(y) & 0x1fffff) << 21 | std::uint64_t(std::int64_t(z) & 0x1fffff));
-    };
+    auto each_cell = [&](const Box& b, const auto& visit) { each_cell_of(b, cell, visit); };
     std::unordered_map<std::uint64_t, std::uint32_t> flipped_head;  // cell -> its last entry in flipped + 1 (0: none)
     std::vector<std::pair<std::uint32_t, std::uint32_t>> flipped;    // (triangle, the cell's entry before it + 1)
     std::vector<std::pair<std::uint32_t, Box>> near;                  // the triangles a join's may cross, and their boxes
@@ -2084,25 +2092,15 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
         }
         return it->second;
     };
-    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
-    auto box_of = [&](const std::array<std::int32_t, 3>& t) {
-        Box b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
-        for (int k = 1; k < 3; ++k) b.first = b.first.cwiseMin(P[std::size_t(t[std::size_t(k)])]), b.second = b.second.cwiseMax(P[std::size_t(t[std::size_t(k)])]);
-        return b;
-    };
-    auto meet = [](const Box& x, const Box& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); };
+    using Box = TriangleBox;
+    auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
+    auto meet = boxes_meet;
     std::vector<std::uint32_t> flipped; // in this pass (the index files them where they were)
     // ...and filed by the cells (two voxels wide) their boxes meet, to be found near a flip (a list of them all
     // cost the scan at 128 half a second).
     const double cell = 2 * h;
     std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> flipped_in;
-    auto each_cell = [&](const Box& b, const auto& visit) {
-        const Eigen::Vector3d lo = (b.first / cell).array().floor(), hi = (b.second / cell).array().floor();
-        for (double z = lo.z(); z <= hi.z(); ++z)
-            for (double y = lo.y(); y <= hi.y(); ++y)
-                for (double x = lo.x(); x <= hi.x(); ++x)
-                    visit(std::uint64_t(std::int64_t(x) & 0x1fffff) << 42 | std::uint64_t(std::int64_t(y) & 0x1fffff) << 21 | std::uint64_t(std::int64_t(z) & 0x1fffff));
-    };
+    auto each_cell = [&](const Box& b, const auto& visit) { each_cell_of(b, cell, visit); };
     auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
     std::vector<std::uint32_t> near;
     std::size_t flips = 0;
@@ -2254,13 +2252,9 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
     auto& P = output.vertices;
     const auto& T = output.triangles;
     auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return Eigen::Vector3d((P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])])); };
-    using Box = std::pair<Eigen::Vector3d, Eigen::Vector3d>;
-    auto box_of = [&](const std::array<std::int32_t, 3>& t) {
-        Box b{P[std::size_t(t[0])], P[std::size_t(t[0])]};
-        for (int k = 1; k < 3; ++k) b.first = b.first.cwiseMin(P[std::size_t(t[std::size_t(k)])]), b.second = b.second.cwiseMax(P[std::size_t(t[std::size_t(k)])]);
-        return b;
-    };
-    auto meet = [](const Box& x, const Box& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); };
+    using Box = TriangleBox;
+    auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
+    auto meet = boxes_meet;
     auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
     auto exact_normal = [&](std::int32_t v) {
         const SourcePoint& s = sources[std::size_t(v)];

@@ -142,7 +142,7 @@ struct RefineOptions {
 /// normals turn from the exact normals at their corners (the normals of the faces at each corner's source, as the
 /// maps carry them) trade their shared side for the other diagonal where that turns them less, both face along the
 /// exact normals and neither crosses the output: a triangle from one face of a sharp crease to the other stops
-/// cutting under it, and a triangle folded flat onto its neighbours unfolds (the box's edges: p99 0.002-0.027).
+/// cutting under it, and a triangle folded flat onto its neighbours unfolds (the box's edges: p99 0.004-0.027).
 /// `sources` grows with the vertices. A mesh with quads is left as it is. Parallel (oneTBB); the answer does not depend on the thread
 /// count. Returns the number of vertices added.
 std::size_t refine_to_sources(TriangleMesh& output, std::vector<SourcePoint>& sources, const SourceSurface& input, const std::vector<WarpStep>& steps,
