@@ -2142,7 +2142,9 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
                 if (home && !(normal_of_at(one, *home).dot(N) > 0 && normal_of_at(two, *home).dot(N) > 0)) continue;
                 flips_of_f.push_back({was - now, std::uint32_t(g), one, two});
             }
-            std::sort(flips_of_f.begin(), flips_of_f.end(), [](const Flip& x, const Flip& y) { return x.gain > y.gain; });
+            // Most gain first (three at most: std::sort's path for sixteen draws an array-bounds warning).
+            for (Flip* x = flips_of_f.begin(); x != flips_of_f.end(); ++x)
+                for (Flip* y = x; y != flips_of_f.begin() && y->gain > (y - 1)->gain; --y) std::swap(*y, *(y - 1));
             double gain = 0;
             std::uint32_t best_g = 0;
             std::array<std::int32_t, 3> best_one{}, best_two{};
