@@ -2224,13 +2224,8 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
     return flips;
 }
 
-/// Step 7b: the vertices snapping left where extraction made them (step 3) try again, one at a time, now that
-/// refinement has put the input's creases in around them: where several of a face's corners had their sources on
-/// one crease (the rim of a thin part the warp's carry thickens), moving them all together collapsed the face,
-/// and each alone folded it with the others still off; they stayed up to half a voxel outside the exact warp (the
-/// bunny ear's worst place, 0.35 voxel). A vertex moves onto its image (half a voxel toward one up to a voxel
-/// away) where no triangle around it turns over, collapses, or faces against the exact normal at each of its
-/// corners, and none crosses a triangle near it. Returns the vertices moved.
+/// Where each vertex of `left` goes if it can (snap_again): its exact image, or max_move toward one up to
+/// kPartReach max_move away, from where extraction made it (as in step 3: a later round moves no farther).
 std::vector<Eigen::Vector3d> targets_again(const TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
                                            const std::vector<WarpStep>& steps, const std::vector<std::int32_t>& left, double max_move) {
     const auto& P = output.vertices;
@@ -2248,6 +2243,13 @@ std::vector<Eigen::Vector3d> targets_again(const TriangleMesh& output, const std
     return target;
 }
 
+/// Step 7b: the vertices snapping left where extraction made them (step 3) try again, one at a time, now that
+/// refinement has put the input's creases in around them: where several of a face's corners had their sources on
+/// one crease (the rim of a thin part the warp's carry thickens), moving them all together collapsed the face,
+/// and each alone folded it with the others still off; they stayed up to half a voxel outside the exact warp (the
+/// bunny ear's worst place, 0.35 voxel). A vertex moves onto its image (half a voxel toward one up to a voxel
+/// away) where no triangle around it turns over, collapses, or faces against the exact normal at each of its
+/// corners, and none crosses a triangle near it. Returns the triangles around those it moved; `count` grows by them.
 std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
                                       const std::vector<WarpStep>& steps, const std::vector<std::int32_t>& left, const std::vector<Eigen::Vector3d>& target,
                                       OutputIndex& index, double h, std::size_t& count) {
