@@ -1662,6 +1662,10 @@ TriangleBox box_of(const std::vector<Eigen::Vector3d>& P, const std::array<std::
     return {p.cwiseMin(q).cwiseMin(r), p.cwiseMax(q).cwiseMax(r)};
 }
 bool boxes_meet(const TriangleBox& x, const TriangleBox& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); }
+/// The normal of triangle t with corners in X, unnormalized (twice its area long).
+Eigen::Vector3d triangle_normal(const std::vector<Eigen::Vector3d>& X, const std::array<std::int32_t, 3>& t) {
+    return (X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]);
+}
 /// Calls visit(key) for each cell (of side `cell`) that box b meets: the keys of a hash grid.
 template <class Visit>
 void each_cell_of(const TriangleBox& b, double cell, const Visit& visit) {
@@ -1671,6 +1675,27 @@ void each_cell_of(const TriangleBox& b, double cell, const Visit& visit) {
             for (double x = lo.x(); x <= hi.x(); ++x)
                 visit(std::uint64_t(std::int64_t(x) & 0x1fffff) << 42 | std::uint64_t(std::int64_t(y) & 0x1fffff) << 21 | std::uint64_t(std::int64_t(z) & 0x1fffff));
 }
+/// Triangles changed since the index filed them (it has them where they were), filed by the cells two voxels wide
+/// their boxes met when filed; a triangle changed again is filed again (flip_to_normals, snap_again). A list of them
+/// all, each tested against every query, cost the scan's flips at 128 half a second.
+class ChangedCells {
+public:
+    explicit ChangedCells(double h) : cell_(2 * h) {}
+    void file(std::uint32_t f, const TriangleBox& b) { each_cell_of(b, cell_, [&](std::uint64_t k) { cells_[k].push_back(f); }); }
+    /// Calls visit(f) for each triangle filed in a cell that box b meets (some more than once).
+    template <class Visit>
+    void near(const TriangleBox& b, const Visit& visit) const {
+        each_cell_of(b, cell_, [&](std::uint64_t k) {
+            if (const auto it = cells_.find(k); it != cells_.end())
+                for (const std::uint32_t f : it->second) visit(f);
+        });
+    }
+    void clear() { cells_.clear(); }
+
+private:
+    double cell_;
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
+};
 
 /// The output's edges along the input's creases. Points of a crease come into the output put in (insert_points),
 /// split on it (refine_with) or snapped onto a convex ridge, but two that follow each other along it are often not
@@ -1776,9 +1801,7 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
                 if (T[*g][std::size_t(k)] == x && T[*g][std::size_t((k + 1) % 3)] == y) return f = *g, T[*g][std::size_t((k + 2) % 3)];
         return -1;
     };
-    auto normal_of = [&](const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& X) {
-        return Eigen::Vector3d((X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]));
-    };
+    auto normal_of = [](const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& X) { return triangle_normal(X, t); };
     using Box = TriangleBox;
     auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
     auto meet = boxes_meet;
@@ -1983,10 +2006,7 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
     const auto& P = output.vertices;
     auto& T = output.triangles;
     if (!output.quads.empty() || T.empty() || sources.size() != P.size()) return 0;
-    auto normal_of_at = [](const std::array<std::int32_t, 3>& t, const std::vector<Eigen::Vector3d>& X) {
-        return Eigen::Vector3d((X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]));
-    };
-    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return normal_of_at(t, P); };
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
     // Cheap first: a triangle that meets a neighbour at more than kSteep (a fold, or one across a crease, or on
     // either side of one); only those are judged by their sources. `only`: these triangles instead. (Vertex
     // normals would do, but an array of them is megabytes of fresh pages: 40 ms at 256.)
@@ -2060,9 +2080,10 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
         if (area == 0) return 0.0;
         double sum = 0;
         for (const auto c : t) {
+            const Normals& exact_here = exact_at(c);
             double best = -1;
-            for (const auto& m : exact_at(c)) best = std::max(best, n.dot(m) / area);
-            if (!exact_at(c).empty()) sum += 1 - best;
+            for (const auto& m : exact_here) best = std::max(best, n.dot(m) / area);
+            if (!exact_here.empty()) sum += 1 - best;
         }
         return 0.5 * area * sum;
     };
@@ -2072,7 +2093,7 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
             return !exact_at(c).empty() && std::all_of(exact_at(c).begin(), exact_at(c).end(), [&](const Eigen::Vector3d& m) { return n.dot(m) < 0; });
         });
     };
-    // Worth a try: off the exact normals by more than kSteep at a corner (misfit over 0.3 of its area there).
+    // Worth a try: corners' terms adding up to more than kOffNormals.
     auto off = [&](const std::array<std::int32_t, 3>& t) { return misfit(t) > kOffNormals * 0.5 * normal_of(t).norm(); };
     std::vector<std::uint32_t> folds;
     for (const std::uint32_t f : suspects)
@@ -2096,11 +2117,7 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
     auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
     auto meet = boxes_meet;
     std::vector<std::uint32_t> flipped; // in this pass (the index files them where they were)
-    // ...and filed by the cells (two voxels wide) their boxes meet, to be found near a flip (a list of them all
-    // cost the scan at 128 half a second).
-    const double cell = 2 * h;
-    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> flipped_in;
-    auto each_cell = [&](const Box& b, const auto& visit) { each_cell_of(b, cell, visit); };
+    ChangedCells flipped_in(h);
     auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
     std::vector<std::uint32_t> near;
     std::size_t flips = 0;
@@ -2139,7 +2156,7 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
                     for (const auto& m : exact_at(v)) N += m;
                 if (!(normal_of(one).dot(N) > 0 && normal_of(two).dot(N) > 0)) continue;
                 // Facing along N at home too, where put_back_crossings may take the corners back.
-                if (home && !(normal_of_at(one, *home).dot(N) > 0 && normal_of_at(two, *home).dot(N) > 0)) continue;
+                if (home && !(triangle_normal(*home, one).dot(N) > 0 && triangle_normal(*home, two).dot(N) > 0)) continue;
                 flips_of_f.push_back({was - now, std::uint32_t(g), one, two});
             }
             // Most gain first (three at most: std::sort's path for sixteen draws an array-bounds warning).
@@ -2171,10 +2188,8 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
                 const Box reach{box1.first.cwiseMin(box2.first), box1.second.cwiseMax(box2.second)};
                 near.clear();
                 index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
-                each_cell(reach, [&](std::uint64_t k) {
-                    if (const auto it = flipped_in.find(k); it != flipped_in.end())
-                        for (const std::uint32_t q : it->second)
-                            if (meet(box_of(T[q]), reach)) near.push_back(q);
+                flipped_in.near(reach, [&](std::uint32_t q) {
+                    if (meet(box_of(T[q]), reach)) near.push_back(q);
                 });
                 const bool crosses = std::any_of(near.begin(), near.end(), [&](std::uint32_t q) {
                     if (q == f || q == flip.g) return false;
@@ -2198,7 +2213,7 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
             own(c).push_back(best_g);
             own(d).push_back(f);
             flipped.push_back(f), flipped.push_back(best_g);
-            for (const std::uint32_t t : {f, best_g}) each_cell(box_of(T[t]), [&](std::uint64_t k) { flipped_in[k].push_back(t); });
+            for (const std::uint32_t t : {f, best_g}) flipped_in.file(t, box_of(T[t]));
             ++flips;
         }
         if (flips == before) break;
@@ -2255,7 +2270,7 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
                                       OutputIndex& index, double h, std::size_t& count) {
     auto& P = output.vertices;
     const auto& T = output.triangles;
-    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return Eigen::Vector3d((P[std::size_t(t[1])] - P[std::size_t(t[0])]).cross(P[std::size_t(t[2])] - P[std::size_t(t[0])])); };
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
     using Box = TriangleBox;
     auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
     auto meet = boxes_meet;
@@ -2266,6 +2281,7 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
     };
     const double tiny = 1e-4 * h * h;
     std::vector<std::uint32_t> moved; // triangles around a vertex moved (the index files them where they were)
+    ChangedCells moved_in(h);
     std::vector<std::uint32_t> near;
     for (std::size_t i = 0; i < left.size(); ++i) {
         const std::int32_t v = left[i];
@@ -2291,8 +2307,9 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
         if (fine) {
             near.clear();
             index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
-            for (const std::uint32_t q : moved)
+            moved_in.near(reach, [&](std::uint32_t q) {
                 if (meet(box_of(T[q]), reach)) near.push_back(q);
+            });
             for (const std::uint32_t* f = begin; f != end && fine; ++f) {
                 const Box b = box_of(T[*f]);
                 for (const std::uint32_t q : near)
@@ -2308,6 +2325,7 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
         }
         ++count;
         moved.insert(moved.end(), begin, end);
+        for (const std::uint32_t* f = begin; f != end; ++f) moved_in.file(*f, box_of(T[*f]));
     }
     std::sort(moved.begin(), moved.end());
     moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
