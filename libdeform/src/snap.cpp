@@ -403,6 +403,24 @@ std::vector<T> concat(std::vector<T> a, const std::vector<T>& b) {
     return a;
 }
 
+/// Calls each(i, out) for every i in [0, n), in parallel over fixed blocks of `block`, and returns what the calls
+/// appended to `out`, in the order of i (for lists of megabytes, which parallel_reduce with concat copies over and
+/// over).
+template <class T, class Each>
+std::vector<T> gather_in_order(std::size_t n, std::size_t block, const Each& each) {
+    std::vector<std::vector<T>> found((n + block - 1) / block);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, found.size()), [&](const auto& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b)
+            for (std::size_t i = b * block; i != std::min(n, (b + 1) * block); ++i) each(i, found[b]);
+    });
+    std::size_t total = 0;
+    for (const auto& f : found) total += f.size();
+    std::vector<T> out;
+    out.reserve(total);
+    for (const auto& f : found) out.insert(out.end(), f.begin(), f.end());
+    return out;
+}
+
 void check_options(const SnapOptions& options) {
     if (!(options.voxel_size > 0) || !std::isfinite(options.voxel_size))
         throw InvalidInput("snap: voxel size must be positive, got " + std::to_string(options.voxel_size));
@@ -974,9 +992,8 @@ struct Crease {
 std::vector<Crease> input_creases(const SourceSurface::Impl& surface, const Adjacency& around) {
     const double cos_corner = std::cos(kCornerAngle * M_PI / 180.0);
     const auto& F = surface.faces;
-    std::vector<Crease> creases;
-    for (std::size_t f = 0; f < F.size(); ++f) {
-        if (surface.normal[f].isZero()) continue;
+    return gather_in_order<Crease>(F.size(), 4096, [&](std::size_t f, std::vector<Crease>& creases) {
+        if (surface.normal[f].isZero()) return;
         for (int k = 0; k < 3; ++k) {
             const std::int32_t first = F[f][std::size_t(k)], second = F[f][std::size_t((k + 1) % 3)];
             if (first > second) continue;
@@ -984,10 +1001,10 @@ std::vector<Crease> input_creases(const SourceSurface::Impl& surface, const Adja
             int sharing = 0;
             for (const std::uint32_t* q = around.begin(std::size_t(first)); q != around.end(std::size_t(first)); ++q)
                 if (*q != f && std::find(F[*q].begin(), F[*q].end(), second) != F[*q].end()) g = *q, ++sharing;
-            if (sharing == 1 && surface.normal[f].dot(surface.normal[std::size_t(g)]) < cos_corner) creases.push_back({first, second, std::uint32_t(f), std::uint32_t(g)});
+            if (sharing == 1 && surface.normal[f].dot(surface.normal[std::size_t(g)]) < cos_corner)
+                creases.push_back({first, second, std::uint32_t(f), std::uint32_t(g)});
         }
-    }
-    return creases;
+    });
 }
 
 /// The input's corners (vertices whose faces' normals spread by more than kCornerAngle) and points along its creases
@@ -1003,25 +1020,28 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
         for (int k = 0; k < 3; ++k) b[k] = std::size_t(F[f][std::size_t(k)]) == v ? 1.0 : 0.0;
         return b;
     };
-    std::vector<FeaturePoint> points;
-    for (std::size_t v = 0; v < V.size(); ++v) {
+    // Corners, then crease points, each in the input's order (in parallel: a scan of 600,000 faces took 0.29 s on
+    // one core).
+    std::vector<FeaturePoint> points = gather_in_order<FeaturePoint>(V.size(), 4096, [&](std::size_t v, auto& found) {
         const std::uint32_t *fs = around.begin(v), *end = around.end(v);
-        if (end - fs < 2) continue;
+        if (end - fs < 2) return;
         double widest = 1, longest = 0;
         for (const std::uint32_t* a = fs; a != end; ++a) {
             for (const std::uint32_t* b = a + 1; b != end; ++b) widest = std::min(widest, surface.normal[*a].dot(surface.normal[*b]));
             for (const auto w : F[*a]) longest = std::max(longest, (V[std::size_t(w)] - V[v]).norm());
         }
-        if (widest >= cos_corner || longest < 0.5 * h) continue;
+        if (widest >= cos_corner || longest < 0.5 * h) return;
         FeaturePoint p;
         p.at = V[v];
         p.count = std::min(std::size_t(end - fs), FeaturePoint::kFaces);
         std::copy_n(fs, p.count, p.faces.begin());
         p.source.face = std::int32_t(fs[0]);
         p.source.barycentric = slot(fs[0], v);
-        points.push_back(p);
-    }
-    for (const Crease& crease : input_creases(surface, around)) {
+        found.push_back(p);
+    });
+    const std::vector<Crease> creases = input_creases(surface, around);
+    const auto on_creases = gather_in_order<FeaturePoint>(creases.size(), 256, [&](std::size_t c, auto& found) {
+        const Crease& crease = creases[c];
         const Eigen::Vector3d a = V[std::size_t(crease.first)], b = V[std::size_t(crease.second)];
         // Half a voxel apart where the map has taken the crease (an edit may stretch it).
         const double length = steps.empty() ? (b - a).norm() : (push_forward(steps, b) - push_forward(steps, a)).norm();
@@ -1034,9 +1054,10 @@ std::vector<FeaturePoint> feature_points(const SourceSurface::Impl& surface, con
             p.faces = {crease.f, crease.g};
             p.source.face = std::int32_t(crease.f);
             p.source.barycentric = (1 - t) * slot(crease.f, std::size_t(crease.first)) + t * slot(crease.f, std::size_t(crease.second));
-            points.push_back(p);
+            found.push_back(p);
         }
-    }
+    });
+    points.insert(points.end(), on_creases.begin(), on_creases.end());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1024), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) points[i].image = push_forward(steps, points[i].at);
     });
