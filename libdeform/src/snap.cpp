@@ -23,6 +23,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -182,16 +183,33 @@ Eigen::Vector3d closest_barycentric(const Eigen::Vector3d& p, const Eigen::Vecto
 /// Area-weighted vertex normals (unnormalized sums of face cross products; a quad counts by the cross product of
 /// its diagonals, twice its vector area).
 std::vector<Eigen::Vector3d> vertex_normals(const TriangleMesh& mesh) {
-    std::vector<Eigen::Vector3d> n(mesh.vertices.size(), Eigen::Vector3d::Zero());
     const auto& V = mesh.vertices;
-    for (const auto& t : mesh.triangles) {
-        const Eigen::Vector3d c = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
-        for (auto i : t) n[std::size_t(i)] += c;
-    }
-    for (const auto& q : mesh.quads) {
-        const Eigen::Vector3d c = (V[q[2]] - V[q[0]]).cross(V[q[3]] - V[q[1]]);
-        for (auto i : q) n[std::size_t(i)] += c;
-    }
+    const std::size_t nv = V.size();
+    std::vector<Eigen::Vector3d> n;
+    n.resize(nv); // (each chunk zeroes its own vertices: the pages are first touched by the thread that fills them)
+    // Each chunk of vertices, in parallel, takes every face with a corner in it, in the faces' order: a vertex's sum
+    // adds up in the same order as one pass over the faces would, whatever the chunks. Extraction numbers the
+    // vertices block by block, so most faces fall in one chunk (the bunny's 505,000 at 256: 19 ms on one core).
+    const std::size_t chunks = std::clamp<std::size_t>(std::size_t(tbb::this_task_arena::max_concurrency()), 1, 64);
+    const std::size_t per = (nv + chunks - 1) / std::max<std::size_t>(chunks, 1);
+    tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t k) {
+        const std::size_t lo = std::min(nv, k * per), hi = std::min(nv, lo + per);
+        if (lo == hi) return;
+        std::fill(n.begin() + std::ptrdiff_t(lo), n.begin() + std::ptrdiff_t(hi), Eigen::Vector3d::Zero());
+        auto mine = [&](std::int32_t i) { return std::size_t(i) >= lo && std::size_t(i) < hi; };
+        for (const auto& t : mesh.triangles) {
+            if (!mine(t[0]) && !mine(t[1]) && !mine(t[2])) continue;
+            const Eigen::Vector3d c = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
+            for (auto i : t)
+                if (mine(i)) n[std::size_t(i)] += c;
+        }
+        for (const auto& q : mesh.quads) {
+            if (!mine(q[0]) && !mine(q[1]) && !mine(q[2]) && !mine(q[3])) continue;
+            const Eigen::Vector3d c = (V[q[2]] - V[q[0]]).cross(V[q[3]] - V[q[1]]);
+            for (auto i : q)
+                if (mine(i)) n[std::size_t(i)] += c;
+        }
+    });
     return n;
 }
 
