@@ -1216,15 +1216,26 @@ public:
         std::vector<std::uint32_t> sorted(changed);
         std::sort(sorted.begin(), sorted.end());
         sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
-        for (std::size_t i = 0; i < corners.size();) {
-            const std::int32_t v = corners[i].first;
-            const auto [b, e] = ring(std::size_t(v));
-            std::vector<std::uint32_t> list;
-            for (const std::uint32_t* q = b; q != e; ++q) // triangles that still hold v, and are not among the changed
-                if (!std::binary_search(sorted.begin(), sorted.end(), *q) && std::find(T[*q].begin(), T[*q].end(), v) != T[*q].end()) list.push_back(*q);
-            for (; i < corners.size() && corners[i].first == v; ++i) list.push_back(corners[i].second);
-            if (patch_[std::size_t(v)] < 0) patch_[std::size_t(v)] = std::int32_t(patches_.size()), patches_.emplace_back();
-            patches_[std::size_t(patch_[std::size_t(v)])] = std::move(list);
+        // Each vertex's new ring from its old one, in parallel (a ring reads only its own), then filed in order.
+        std::vector<std::size_t> runs; // where each vertex's run of corners begins
+        for (std::size_t i = 0; i < corners.size(); ++i)
+            if (i == 0 || corners[i].first != corners[i - 1].first) runs.push_back(i);
+        runs.push_back(corners.size());
+        std::vector<std::vector<std::uint32_t>> lists(runs.size() - 1);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, lists.size(), 256), [&](const auto& r) {
+            for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                const std::int32_t v = corners[runs[k]].first;
+                const auto [b, e] = ring(std::size_t(v));
+                std::vector<std::uint32_t>& list = lists[k];
+                for (const std::uint32_t* q = b; q != e; ++q) // triangles that still hold v, and are not among the changed
+                    if (!std::binary_search(sorted.begin(), sorted.end(), *q) && std::find(T[*q].begin(), T[*q].end(), v) != T[*q].end()) list.push_back(*q);
+                for (std::size_t i = runs[k]; i < runs[k + 1]; ++i) list.push_back(corners[i].second);
+            }
+        });
+        for (std::size_t k = 0; k < lists.size(); ++k) {
+            const auto v = std::size_t(corners[runs[k]].first);
+            if (patch_[v] < 0) patch_[v] = std::int32_t(patches_.size()), patches_.emplace_back();
+            patches_[std::size_t(patch_[v])] = std::move(lists[k]);
         }
         // Only the changed triangles are filed anew: their old entries out, theirs merged in (refiling every moved
         // triangle each time cost step 8 a few milliseconds a pass at 256).
