@@ -514,15 +514,17 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
 
 namespace deform_internal {
 
-// Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization.
-SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report) {
+// Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization. `beside`:
+// bytes held while voxelizing (deform_mesh's snapping tree), counted in the estimate.
+SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report,
+                                 std::uint64_t beside) {
     VoxelizeOptions vo = options;
     vo.progress = progress;
     vo.report = report;
     // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
     // voxel of surface area, measured on the bunny); the extracted mesh takes less than that.
     const Voxmap frame = voxelize_frame(mesh, vo);
-    require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)), vo.max_memory_bytes,
+    require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)) + beside, vo.max_memory_bytes,
                    "deforming at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
     return voxelize_sparse(mesh, vo);
 }
@@ -621,6 +623,10 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
 
 } // namespace deform_internal
 
+/// What the snapping tree holds per input face while voxelizing (deform_mesh's peak rose by 105 bytes a face on a
+/// 602,064-face scan at 256 once the tree was built beside it).
+constexpr std::uint64_t kSurfaceBytesPerFace = 160;
+
 TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     const auto t = Clock::now();
     // The input's tree for snapping and transfer, built beside voxelizing: CGAL builds it on one core, 1.2 s for
@@ -630,6 +636,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     std::unique_ptr<SourceSurface> surface;
     tbb::task_group beside;
     const bool wants_surface = (options.snap || (options.attributes && mesh.has_attributes())) && mesh.face_count() > 0;
+    const std::uint64_t surface_bytes = wants_surface ? kSurfaceBytesPerFace * mesh.face_count() : 0;
     if (wants_surface)
         beside.run([&] {
             try {
@@ -641,7 +648,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     VoxelizeReport voxelized;
     SparseVoxmap voxmap;
     try {
-        voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress, &voxelized);
+        voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress, &voxelized, surface_bytes);
     } catch (...) {
         beside.wait();
         throw;

@@ -7,7 +7,8 @@
 namespace voxwarp {
 
 namespace deform_internal {
-SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report = nullptr);
+SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report = nullptr,
+                                 std::uint64_t beside = 0);
 TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report,
                               const SourceSurface* surface = nullptr);
 } // namespace deform_internal
