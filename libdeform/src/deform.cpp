@@ -631,8 +631,8 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     const auto t = Clock::now();
     // The input's tree for snapping and transfer, built beside voxelizing: CGAL builds it on one core, 1.2 s for
     // a scan of 600,000 faces (0.05 s for the bundled one of 37,600), while voxelizing leaves a core idle at times.
-    // That scan's deform at 256 took 15.2 s, now 12.8-13.6; the tree now adds to voxelizing's peak memory (414 ->
-    // 477 MB there; about 100 bytes a face), where it was built after.
+    // That scan's deform at 256 took 15.2 s, now 12.8-13.6; the tree now adds to voxelizing's peak memory (405 ->
+    // 466 MiB there; about 105 bytes a face), where it was built after.
     std::unique_ptr<SourceSurface> surface;
     tbb::task_group beside;
     const bool wants_surface = (options.snap || (options.attributes && mesh.has_attributes())) && mesh.face_count() > 0;
