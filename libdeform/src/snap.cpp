@@ -1174,15 +1174,13 @@ public:
                 const double dx = std::sqrt(left);
                 const std::int64_t x0 = std::max<std::int64_t>(0, cell_of(p - Eigen::Vector3d(dx, 0, 0))[0]);
                 const std::int64_t x1 = std::max<std::int64_t>(0, cell_of(p + Eigen::Vector3d(dx, 0, 0))[0]);
-                row(y, z, x0, x1, [&](const Item& i) { // the triangle lies within i.r of its middle
-                    if ((origin_ + Eigen::Vector3d(i.x, i.y, i.z) - p).norm() <= bound + double(i.r) + slack_) visit(i.f);
+                row(y, z, x0, x1, [&](const Item& i) {
+                    if (ball_within(i, p, bound)) visit(i.f);
                 });
             }
         }
-        for (const Filed& w : wide_) {
-            const Item& i = w.second;
-            if ((origin_ + Eigen::Vector3d(i.x, i.y, i.z) - p).norm() <= bound + double(i.r) + slack_) visit(i.f);
-        }
+        for (const Filed& w : wide_)
+            if (ball_within(w.second, p, bound)) visit(w.second.f);
     }
 
     /// Calls visit(f) for the triangles whose middles lie in the cells x0 .. x1 of the row (y, z) of point p's cell.
@@ -1300,6 +1298,10 @@ private:
     }
     std::int64_t row_of(std::uint64_t k) const { return std::int64_t(k >> 42) * rows_y_ + std::int64_t(k >> 21 & kMask); }
 
+    /// Whether item i's ball (the triangle lies within i.r of its middle) comes within `bound` of p.
+    bool ball_within(const Item& i, const Eigen::Vector3d& p, double bound) const {
+        return (origin_ + Eigen::Vector3d(i.x, i.y, i.z) - p).norm() <= bound + double(i.r) + slack_;
+    }
     /// Whether item i's ball meets the box [lo, hi].
     bool ball_meets(const Item& i, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) const {
         const Eigen::Vector3d m = origin_ + Eigen::Vector3d(i.x, i.y, i.z);
@@ -1644,16 +1646,10 @@ std::size_t insert_points(TriangleMesh& output, std::vector<SourcePoint>& source
     };
     // The proposals in the order of their points (fixed blocks, joined in order): most points propose nothing, and
     // a list of all of them would be megabytes of fresh pages each pass.
-    constexpr std::size_t kBlock = 256;
-    std::vector<std::vector<Insert>> proposed((ni + kBlock - 1) / kBlock);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, proposed.size()), [&](const auto& r) {
-        for (std::size_t block = r.begin(); block != r.end(); ++block)
-            for (std::size_t v = block * kBlock; v != std::min(ni, (block + 1) * kBlock); ++v)
-                if (!settled[v])
-                    if (auto in = propose(v)) proposed[block].push_back(std::move(*in));
+    const std::vector<Insert> found = gather_in_order<Insert>(ni, 256, [&](std::size_t v, std::vector<Insert>& out) {
+        if (!settled[v])
+            if (auto in = propose(v)) out.push_back(std::move(*in));
     });
-    std::vector<Insert> found;
-    for (auto& block : proposed) found.insert(found.end(), block.begin(), block.end());
     const std::size_t nf = found.size();
     // The points go in in order, each unless it is unsound, its triangles or one beside them were split already, or
     // its pieces cross those put in before it. Only the points that order reaches need the soundness test, a few
@@ -1756,8 +1752,8 @@ void each_cell_of(const TriangleBox& b, double cell, const Visit& visit) {
                 visit(std::uint64_t(std::int64_t(x) & 0x1fffff) << 42 | std::uint64_t(std::int64_t(y) & 0x1fffff) << 21 | std::uint64_t(std::int64_t(z) & 0x1fffff));
 }
 /// Triangles changed since the index filed them (it has them where they were), filed by the cells two voxels wide
-/// their boxes met when filed; a triangle changed again is filed again (flip_to_normals, snap_again). A list of them
-/// all, each tested against every query, cost the scan's flips at 128 half a second.
+/// their boxes met when filed; a triangle changed again is filed again (join_creases, flip_to_normals, snap_again).
+/// A list of them all, each tested against every query, cost the scan's flips at 128 half a second.
 class ChangedCells {
 public:
     explicit ChangedCells(double h) : cell_(2 * h) {}
@@ -1897,12 +1893,9 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
         }
         return own > 0 && (above == own || below == own);
     };
-    // The triangles flipped so far, filed by the cells (two voxels wide) their boxes meet: the index has them where
-    // they were. A linked list per cell.
-    const double cell = 2 * h;
-    auto each_cell = [&](const Box& b, const auto& visit) { each_cell_of(b, cell, visit); };
-    std::unordered_map<std::uint64_t, std::uint32_t> flipped_head;  // cell -> its last entry in flipped + 1 (0: none)
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> flipped;    // (triangle, the cell's entry before it + 1)
+    // The triangles flipped so far (the index has them where they were).
+    ChangedCells flipped_in(h);
+    std::vector<std::uint32_t> flips;
     std::vector<std::pair<std::uint32_t, Box>> near;                  // the triangles a join's may cross, and their boxes
     std::vector<std::pair<std::int32_t, std::int32_t>> crossed;       // (kept from join to join: no allocation per join)
     std::deque<std::pair<std::int32_t, std::int32_t>> queue;
@@ -1988,22 +1981,14 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
             if (const Box b = box_of(T[g]); meet(b, reach)) near.push_back({g, b});
         };
         index.meeting(reach.first, reach.second, consider);
-        each_cell(reach, [&](std::uint64_t k) {
-            if (const auto it = flipped_head.find(k); it != flipped_head.end())
-                for (std::uint32_t e = it->second; e != 0; e = flipped[e - 1].second) consider(flipped[e - 1].first);
-        });
+        flipped_in.near(reach, consider);
         for (const std::uint32_t f : changed) {
             const Box b = box_of(T[f]);
             const Eigen::Vector3d n = normal_of(T[f], P);
             for (const auto& [g, gb] : near)
                 if (g != f && meet(gb, b) && !apart(T[g], T[f], n) && triangles_cross(at, T[f], T[g])) return undo();
         }
-        for (const std::uint32_t f : changed)
-            each_cell(box_of(T[f]), [&](std::uint64_t k) {
-                std::uint32_t& head = flipped_head[k];
-                flipped.push_back({f, head});
-                head = std::uint32_t(flipped.size());
-            });
+        for (const std::uint32_t f : changed) flipped_in.file(f, box_of(T[f])), flips.push_back(f);
         return true;
     };
 
@@ -2057,8 +2042,6 @@ std::size_t join_creases(TriangleMesh& output, const std::vector<SourcePoint>& s
         if (join(pair.a, pair.b, N, pair.exact) || join(pair.b, pair.a, N, pair.exact)) ++count;
     }
     // The index, up to date for step 8: the triangles flipped here.
-    std::vector<std::uint32_t> flips;
-    for (const auto& entry : flipped) flips.push_back(entry.first);
     std::sort(flips.begin(), flips.end());
     flips.erase(std::unique(flips.begin(), flips.end()), flips.end());
     if (!flips.empty()) index.update(output, flips);
@@ -2510,18 +2493,12 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         };
         // The triangles with a split side, and their sides' splits.
         using Cut = std::pair<std::int32_t, std::array<std::int32_t, 3>>;
-        std::vector<std::vector<Cut>> cuts((F + kBlock - 1) / kBlock);
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cuts.size()), [&](const auto& r) {
-            for (std::size_t block = r.begin(); block != r.end(); ++block)
-                for (std::size_t f = block * kBlock; f != std::min(F, (block + 1) * kBlock); ++f) {
-                    const auto& t = T[f];
-                    if (!touched[std::size_t(t[0])] + !touched[std::size_t(t[1])] + !touched[std::size_t(t[2])] > 1) continue;
-                    const std::array<std::int32_t, 3> s{split_of(t[0], t[1]), split_of(t[1], t[2]), split_of(t[2], t[0])};
-                    if (s[0] >= 0 || s[1] >= 0 || s[2] >= 0) cuts[block].push_back({std::int32_t(f), s});
-                }
+        const std::vector<Cut> cut = gather_in_order<Cut>(F, kBlock, [&](std::size_t f, std::vector<Cut>& out) {
+            const auto& t = T[f];
+            if (!touched[std::size_t(t[0])] + !touched[std::size_t(t[1])] + !touched[std::size_t(t[2])] > 1) return;
+            const std::array<std::int32_t, 3> s{split_of(t[0], t[1]), split_of(t[1], t[2]), split_of(t[2], t[0])};
+            if (s[0] >= 0 || s[1] >= 0 || s[2] >= 0) out.push_back({std::int32_t(f), s});
         });
-        std::vector<Cut> cut;
-        for (auto& c : cuts) cut.insert(cut.end(), c.begin(), c.end());
         auto position = [&](Corner c) -> const Eigen::Vector3d& { return c >= 0 ? P[std::size_t(c)] : splits[std::size_t(-c - 1)].at; };
         auto on = [&](std::int32_t i) { return i >= 0 && split[std::size_t(i)]; }; // a side's split, not undone
         // Per cut triangle with two sides split: whether its four-sided piece is cut along the longer diagonal.
