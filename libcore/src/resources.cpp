@@ -2,6 +2,7 @@
 #include <voxwarp/resources.h>
 
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <fstream>
@@ -24,6 +25,13 @@ std::uint64_t peak_resident_bytes() {
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     return std::uint64_t(usage.ru_maxrss) * 1024; // Linux reports KiB
+}
+
+std::uint64_t resident_bytes() {
+    std::ifstream statm("/proc/self/statm");
+    std::uint64_t size = 0, resident = 0;
+    if (!(statm >> size >> resident)) return 0;
+    return resident * std::uint64_t(sysconf(_SC_PAGESIZE));
 }
 
 std::string format_bytes(std::uint64_t bytes) {

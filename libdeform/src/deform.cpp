@@ -514,17 +514,17 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
 
 namespace deform_internal {
 
-// Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization. `beside`:
-// bytes held while voxelizing (deform_mesh's snapping tree), counted in the estimate.
+std::uint64_t memory_estimate(const TriangleMesh& mesh, const DeformOptions& options, double feature_bytes);
+
+// Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization. `estimate`:
+// deform_memory_estimate's, refused up front when above the limit.
 SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report,
-                                 std::uint64_t beside) {
+                                 std::uint64_t estimate) {
     VoxelizeOptions vo = options;
     vo.progress = progress;
     vo.report = report;
-    // Beside the voxmap, the warp keeps 8-byte sums in 8^3 blocks over the band's image (about 300 bytes per
-    // voxel of surface area, measured on the bunny); the extracted mesh takes less than that.
     const Voxmap frame = voxelize_frame(mesh, vo);
-    require_memory(voxelize_memory_estimate(mesh, vo, true) + std::uint64_t(300.0 * surface_voxels(mesh, vo)) + beside, vo.max_memory_bytes,
+    require_memory(estimate, vo.max_memory_bytes,
                    "deforming at " + std::to_string(frame.dims[0]) + "x" + std::to_string(frame.dims[1]) + "x" + std::to_string(frame.dims[2]));
     return voxelize_sparse(mesh, vo);
 }
@@ -536,6 +536,17 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     FeatureSurface features;
     const bool sharpen = options.extract.mesher == Mesher::features && options.extract.adaptivity == 0 && !options.extract.quads;
     if (sharpen) features = sharp_feature_surface(mesh, voxmap.voxel_size(), options.extract.feature_angle);
+    if (sharpen && report.memory_estimate_bytes > 0) {
+        // What the feature mesher adds depends on the input's sharp edges, known only now: checked before the warp
+        // and extraction, against the memory still to come (a session's later calls, on a voxmap it kept, were
+        // checked on their first).
+        const double bytes = 24.0 * double(features.faces.vertices.size()) + 12.0 * double(features.faces.triangles.size()) + 48.0 * double(features.edges.size());
+        report.memory_estimate_bytes = memory_estimate(mesh, options, bytes);
+        const std::uint64_t now = resident_bytes(), held = now > report.resident_bytes_at_start ? now - report.resident_bytes_at_start : 0;
+        const std::uint64_t limit = options.voxelize.max_memory_bytes;
+        require_memory(limit ? report.memory_estimate_bytes : report.memory_estimate_bytes - std::min(held, report.memory_estimate_bytes), limit,
+                       "the feature mesher at " + std::to_string(voxmap.dims()[0]) + "x" + std::to_string(voxmap.dims()[1]) + "x" + std::to_string(voxmap.dims()[2]));
+    }
     // Surface the voxmap loses, on voxelizing and in each edit.
     SurfaceProbe probe(mesh, voxmap.voxel_size());
     probe.check(voxmap, SurfaceProbe::kVoxelize);
@@ -623,21 +634,52 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
 
 } // namespace deform_internal
 
-/// What the snapping tree holds per input face while voxelizing (deform_mesh's peak rose by 105 bytes a face on a
-/// 602,064-face scan at 256 once the tree was built beside it).
-constexpr std::uint64_t kSurfaceBytesPerFace = 160;
+namespace {
+
+/// Whether deform_mesh builds the input's tree (SourceSurface) for snapping or carrying attributes.
+bool wants_source_surface(const TriangleMesh& mesh, const DeformOptions& options) {
+    return (options.snap || (options.attributes && mesh.has_attributes())) && mesh.face_count() > 0;
+}
+
+} // namespace
+
+namespace deform_internal {
+
+/// deform_memory_estimate with the feature mesher's Hermite data known (`feature_bytes`, its vertices, triangles
+/// and edges): six times that is added to extracting and snapping (the bundled scan at 128 / 256: 48 / 63
+/// MiB over marching cubes' peak for 9.7 / 19.0 MiB of it).
+std::uint64_t memory_estimate(const TriangleMesh& mesh, const DeformOptions& options, double feature_bytes) {
+    // Measured peaks over the resident memory at the start (docs/benchmarks.md, Memory): the snapping tree peaks
+    // at 392-396 bytes a face while CGAL builds it (276-360 once built); the warp and extraction at about 16 MiB
+    // (allocator arenas and thread stacks) and 500-560 bytes per voxel of the input's area (the voxmap's blocks
+    // in and out, the warp's 8-byte sums, the output mesh); snapping at up to 853 per voxel of area (the scan at
+    // 128: two sheets, refinement), 520-600 on the bunny. Voxelizing's temporaries are gone before the warp
+    // begins, the warp's before snapping, so the phases' largest counts, the tree beside each.
+    VoxelizeOptions vo = options.voxelize;
+    const double area = surface_voxels(mesh, vo);
+    constexpr double kArenas = 16.0 * 1024 * 1024, kTreePerFace = 400, kWarpPerVoxel = 560, kSnapPerVoxel = 950;
+    const bool tree = wants_source_surface(mesh, options);
+    const double voxelizing = double(voxelize_memory_estimate(mesh, vo, true));
+    const double warping = kArenas + kWarpPerVoxel * area;
+    const double snapping = (tree ? kArenas + kSnapPerVoxel * area : 0.0) + 6 * feature_bytes;
+    return std::uint64_t(std::max({voxelizing, warping, snapping}) + (tree ? kTreePerFace * double(mesh.face_count()) : 0.0));
+}
+
+} // namespace deform_internal
+
+std::uint64_t deform_memory_estimate(const TriangleMesh& mesh, const DeformOptions& options) { return memory_estimate(mesh, options, 0); }
 
 TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     const auto t = Clock::now();
     // The input's tree for snapping and transfer, built beside voxelizing: CGAL builds it on one core, 1.2 s for
     // a scan of 600,000 faces (0.05 s for the bundled one of 37,600), while voxelizing leaves a core idle at times.
     // That scan's deform at 256 took 15.2 s, now 12.8-13.6; the tree now adds to voxelizing's peak memory (405 ->
-    // 466 MiB there; about 105 bytes a face), where it was built after.
+    // 466 MiB there), where it was built after, and the estimate counts it beside every phase.
     std::unique_ptr<SourceSurface> surface;
     tbb::task_group beside;
-    const bool wants_surface = (options.snap || (options.attributes && mesh.has_attributes())) && mesh.face_count() > 0;
-    const std::uint64_t surface_bytes = wants_surface ? kSurfaceBytesPerFace * mesh.face_count() : 0;
-    if (wants_surface)
+    report.resident_bytes_at_start = resident_bytes();
+    report.memory_estimate_bytes = deform_memory_estimate(mesh, options);
+    if (wants_source_surface(mesh, options))
         beside.run([&] {
             try {
                 surface = std::make_unique<SourceSurface>(mesh);
@@ -648,7 +690,7 @@ TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, con
     VoxelizeReport voxelized;
     SparseVoxmap voxmap;
     try {
-        voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress, &voxelized, surface_bytes);
+        voxmap = voxelize_for_deform(mesh, options.voxelize, options.progress, &voxelized, report.memory_estimate_bytes);
     } catch (...) {
         beside.wait();
         throw;

@@ -49,6 +49,8 @@ std::string report_json(const DeformReport& r, const std::map<std::string, std::
                     {"warp", r.seconds_warp},   {"extract", r.seconds_extract}, {"snap", r.seconds_snap},
                     {"transfer", r.seconds_transfer}, {"write", r.seconds_write}};
     j["peak_resident_bytes"] = peak_resident_bytes();
+    if (r.memory_estimate_bytes) j["memory_estimate_bytes"] = r.memory_estimate_bytes;
+    if (r.resident_bytes_at_start) j["resident_bytes_at_start"] = r.resident_bytes_at_start;
     j["output_vertices"] = r.output_vertices;
     j["output_faces"] = r.output_faces;
     if (r.mode == "volume") {

@@ -1,4 +1,5 @@
 #include <voxwarp/errors.h>
+#include <voxwarp/resources.h>
 #include <voxwarp/session.h>
 
 #include <algorithm>
@@ -7,8 +8,8 @@
 namespace voxwarp {
 
 namespace deform_internal {
-SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report = nullptr,
-                                 std::uint64_t beside = 0);
+SparseVoxmap voxelize_for_deform(const TriangleMesh& mesh, const VoxelizeOptions& options, const ProgressCallback& progress, VoxelizeReport* report,
+                                 std::uint64_t estimate);
 TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report,
                               const SourceSurface* surface = nullptr);
 } // namespace deform_internal
@@ -28,10 +29,13 @@ TriangleMesh DeformSession::deform(const EditScript& script, int resolution, Def
     if (resolution > 0) o.voxelize.resolution = resolution, o.voxelize.voxel_size = 0;
     const int key = resolution > 0 ? resolution : 0;
     o.progress = progress;
+    report.resident_bytes_at_start = resident_bytes();
+    report.memory_estimate_bytes = 0; // worked out (an O(faces) pass) only when the voxmap is not kept
     auto it = voxmaps_.find(key);
     if (it == voxmaps_.end()) {
+        report.memory_estimate_bytes = deform_memory_estimate(mesh_, o);
         const auto t = std::chrono::steady_clock::now();
-        auto voxmap = std::make_shared<const SparseVoxmap>(deform_internal::voxelize_for_deform(mesh_, o.voxelize, progress));
+        auto voxmap = std::make_shared<const SparseVoxmap>(deform_internal::voxelize_for_deform(mesh_, o.voxelize, progress, nullptr, report.memory_estimate_bytes));
         report.seconds_voxelize = std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
         it = voxmaps_.emplace(key, std::move(voxmap)).first;
     }

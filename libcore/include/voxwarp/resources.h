@@ -13,6 +13,9 @@ std::uint64_t available_memory_bytes();
 /// Peak resident memory of this process so far (getrusage), bytes.
 std::uint64_t peak_resident_bytes();
 
+/// Resident memory of this process now (/proc/self/statm), bytes; 0 when unknown.
+std::uint64_t resident_bytes();
+
 /// The limit a request is held to: `limit_bytes`, or, when it is 0, 90 % of the memory available now; the largest
 /// value when that is unknown (nothing to check against).
 std::uint64_t memory_limit(std::uint64_t limit_bytes);

@@ -11,6 +11,7 @@
 #include <voxwarp/voxelize.h>
 
 #include <array>
+#include <cstdint>
 #include <map>
 #include <optional>
 #include <string>
@@ -111,12 +112,24 @@ struct DeformReport {
     bool attributes = false;          ///< whether the input's texture coordinates, colours or materials were carried (transfer.h)
     std::size_t triangles_across_charts = 0; ///< with attributes: output triangles straddling a UV seam (each kept in one chart)
     double seconds_transfer = 0;      ///< carrying attributes, source points included when snapping did not find them (part of seconds_extract)
+    std::uint64_t memory_estimate_bytes = 0;   ///< deform_mesh: what deform_memory_estimate asked for before it began
+    std::uint64_t resident_bytes_at_start = 0; ///< deform_mesh: this process's resident memory when it began
     std::vector<ThinPart> thin_parts; ///< what the voxmap lost (mesh input, volume mode), largest first, at most 16
 };
 
 /// Apply every edit of `script` to a voxmap (each edit on a fresh lattice over the previous result).
 /// @throw InvalidInput for constraints far outside the model; see solve_constraints, warp. Cancelled.
 SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const DeformOptions& options, DeformReport& report);
+
+/// Bytes deform_mesh is expected to need beyond what the process holds when it begins (the input mesh is the
+/// caller's): the largest of voxelizing (voxelize_memory_estimate), warping (the voxmap's blocks in and out and
+/// the warp's sums) and extracting and snapping (the output mesh with its source points and index, about 950
+/// bytes per voxel of the input's area), plus the input's snapping tree, which lives through all three. Measured
+/// against the peaks of the bundled bunny and scan and a 600,000-face scan at 128 to 512, with and without
+/// snapping, both meshers (docs/benchmarks.md, Memory): 1.05-1.83 x the peak. The feature mesher's share depends
+/// on the input's sharp edges, and deform_mesh adds it (report.memory_estimate_bytes) once it has found them.
+/// deform_mesh refuses a request above `options.voxelize.max_memory_bytes` (0: 90 % of available memory).
+std::uint64_t deform_memory_estimate(const TriangleMesh& mesh, const DeformOptions& options);
 
 /// Mesh in, re-polygonized deformed mesh out. report.volume_before / after are the input's and output's enclosed
 /// volumes; per move constraint, how far the output surface misses its target.
