@@ -542,10 +542,13 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
             }
         }
     // 134 before fans on an edge slid along it (the octahedron's first turn alone 22), 42 after, 17 since vertices
-    // on a face are not drawn sideways onto the feature surface's rim: 8 at the L block's notch, 9 at the acute
-    // tips, where marching cubes has 25 of its own.
+    // on a face are not drawn sideways onto the feature surface's rim (8 at the L block's notch, 9 at the acute
+    // tips, where marching cubes has 25 of its own), 9 since a vertex whose triangles lie in one plane but fold
+    // there moves to the middle of its loop (unfold): 4 at the notch (two pairs back to back across the top face's
+    // corner), 5 at the tips. The outputs are the same bits on every run, so the bound is close: without the move,
+    // 17.
     std::printf("polyhedra: %zu triangles facing against their shape\n", facing);
-    EXPECT_LE(facing, 34u);
+    EXPECT_LE(facing, 12u);
 }
 
 // Random densities put ambiguous faces and cubes everywhere, inside voxels on the border, and values exactly at

@@ -216,7 +216,7 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     }
 }
 
-std::vector<std::uint32_t> unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
+std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
                                   const std::vector<Eigen::Vector3d>& normals) {
     auto reference = [&](std::initializer_list<std::int32_t> corners) {
         Eigen::Vector3d m = Eigen::Vector3d::Zero();
@@ -254,6 +254,74 @@ std::vector<std::uint32_t> unfold(const std::vector<Eigen::Vector3d>& vertices, 
             rewritten.push_back(f), rewritten.push_back(u);
         }
     }
+    // Folds no flip undoes: a corner whose triangles all lie in one plane, but which lies past the side of its
+    // loop (fans meeting at a concave edge leave a vertex of marching cubes with three triangles so, its loop's
+    // sides already edges, where a flip would make one twice). It moves to the middle of its loop when every one of
+    // its triangles then faces the way the plane does: the surface is the same plane, only its triangles change.
+    std::vector<std::uint32_t> still;
+    for (const std::uint32_t f : bad)
+        if (folded(triangles[f])) still.push_back(f);
+    if (still.empty()) return rewritten;
+    std::vector<std::uint8_t> corner(vertices.size(), 0);
+    for (const std::uint32_t f : still)
+        for (const auto v : triangles[f]) corner[std::size_t(v)] = 1;
+    std::unordered_map<std::int32_t, std::vector<std::uint32_t>> around;
+    for (const std::uint32_t g : select_in_parallel(triangles.size(), [&](std::size_t i) {
+             const Triangle& t = triangles[i];
+             return (corner[std::size_t(t[0])] | corner[std::size_t(t[1])] | corner[std::size_t(t[2])]) != 0;
+         }))
+        for (const auto v : triangles[g])
+            if (corner[std::size_t(v)]) around[v].push_back(g);
+    for (const std::uint32_t f : still)
+        for (int c = 0; c < 3 && folded(triangles[f]); ++c) {
+            const std::int32_t v = triangles[f][std::size_t(c)];
+            const std::vector<std::uint32_t>& ring = around[v];
+            // The loop: each triangle's side across from v, chained into one closed cycle (not so at the region's
+            // rim, whose triangles outside it would move unseen).
+            std::unordered_map<std::int32_t, std::int32_t> next;
+            Eigen::Vector3d reference_sum = Eigen::Vector3d::Zero(), middle = Eigen::Vector3d::Zero(), plane = Eigen::Vector3d::Zero();
+            for (const std::uint32_t g : ring) {
+                const Triangle& t = triangles[g];
+                const int k = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+                const std::int32_t a = t[std::size_t((k + 1) % 3)];
+                next.emplace(a, t[std::size_t((k + 2) % 3)]);
+                reference_sum += reference({t[0], t[1], t[2]});
+                middle += vertices[std::size_t(a)];
+            }
+            if (ring.size() < 3 || next.size() != ring.size() || reference_sum.isZero()) continue;
+            std::int32_t w = next.begin()->first;
+            std::size_t steps = 0;
+            for (; steps < ring.size(); ++steps) {
+                const auto it = next.find(w);
+                if (it == next.end()) break;
+                w = it->second;
+                if (w == next.begin()->first) break;
+            }
+            if (steps + 1 != ring.size() || w != next.begin()->first) continue;
+            middle /= double(ring.size());
+            for (const std::uint32_t g : ring) {
+                const Eigen::Vector3d n = area_normal(vertices, triangles[g]);
+                plane += n.dot(reference_sum) >= 0 ? n : Eigen::Vector3d(-n);
+            }
+            if (plane.isZero()) continue;
+            const Eigen::Vector3d unit = plane.normalized();
+            double size = 0, off = std::abs((vertices[std::size_t(v)] - middle).dot(unit));
+            for (const auto& [a, b] : next) {
+                size = std::max(size, (vertices[std::size_t(a)] - middle).norm());
+                off = std::max(off, std::abs((vertices[std::size_t(a)] - middle).dot(unit)));
+            }
+            if (!(off <= 1e-6 * size)) continue;
+            const Eigen::Vector3d was = vertices[std::size_t(v)];
+            vertices[std::size_t(v)] = middle;
+            const bool upright = std::all_of(ring.begin(), ring.end(), [&](std::uint32_t g) {
+                return area_normal(vertices, triangles[g]).dot(unit) > 0 && !folded(triangles[g]);
+            });
+            if (!upright) {
+                vertices[std::size_t(v)] = was;
+                continue;
+            }
+            rewritten.insert(rewritten.end(), ring.begin(), ring.end());
+        }
     return rewritten;
 }
 

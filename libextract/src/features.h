@@ -200,9 +200,11 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
                               std::vector<std::array<std::int32_t, 3>>& splits);
 
 /// After the splits: a triangle that faces against its corners' `normals` (folded in the plane of a face) has the
-/// edge it shares with a neighbour flipped, where the two new triangles face the right way. The mesh stays a
-/// closed 2-manifold. Returns the triangles it rewrote.
-std::vector<std::uint32_t> unfold(const std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
+/// edge it shares with a neighbour flipped, where the two new triangles face the right way; where no flip does,
+/// a corner whose triangles all lie in one plane moves to the middle of its loop, where they then all face the
+/// plane's way. The mesh stays a closed 2-manifold, its surface the same. Returns the triangles it rewrote (those
+/// around a moved vertex included).
+std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
                                   const std::vector<Eigen::Vector3d>& normals);
 
 /// Puts back the corners of triangles that cross another (uncross.cpp), repeating while that changes something:
