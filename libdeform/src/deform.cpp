@@ -651,13 +651,13 @@ namespace deform_internal {
 std::uint64_t memory_estimate(const TriangleMesh& mesh, const DeformOptions& options, double feature_bytes) {
     // Measured peaks over the resident memory at the start (docs/benchmarks.md, Memory): the snapping tree peaks
     // at 392-396 bytes a face while CGAL builds it (276-360 once built); the warp and extraction at about 16 MiB
-    // (allocator arenas and thread stacks) and 500-560 bytes per voxel of the input's area (the voxmap's blocks
-    // in and out, the warp's 8-byte sums, the output mesh); snapping at up to 853 per voxel of area (the scan at
-    // 128: two sheets, refinement), 520-600 on the bunny. Voxelizing's temporaries are gone before the warp
+    // (allocator arenas and thread stacks; 20 counted, room for other machines' allocators) and 500-560 bytes per
+    // voxel of the input's area (the voxmap's blocks in and out, the warp's 8-byte sums, the output mesh);
+    // snapping at up to 853 per voxel of area (the scan at 128: two sheets, refinement), 520-600 on the bunny. Voxelizing's temporaries are gone before the warp
     // begins, the warp's before snapping, so the phases' largest counts, the tree beside each.
     VoxelizeOptions vo = options.voxelize;
     const double area = surface_voxels(mesh, vo);
-    constexpr double kArenas = 16.0 * 1024 * 1024, kTreePerFace = 400, kWarpPerVoxel = 560, kSnapPerVoxel = 950;
+    constexpr double kArenas = 20.0 * 1024 * 1024, kTreePerFace = 400, kWarpPerVoxel = 560, kSnapPerVoxel = 950;
     const bool tree = wants_source_surface(mesh, options);
     const double voxelizing = double(voxelize_memory_estimate(mesh, vo, true));
     const double warping = kArenas + kWarpPerVoxel * area;

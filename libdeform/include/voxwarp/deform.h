@@ -126,7 +126,7 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
 /// the warp's sums) and extracting and snapping (the output mesh with its source points and index, about 950
 /// bytes per voxel of the input's area), plus the input's snapping tree, which lives through all three. Measured
 /// against the peaks of the bundled bunny and scan and a 600,000-face scan at 128 to 512, with and without
-/// snapping, both meshers (docs/benchmarks.md, Memory): 1.05-1.83 x the peak. The feature mesher's share depends
+/// snapping, both meshers (docs/benchmarks.md, Memory): 1.09-1.84 x the peak. The feature mesher's share depends
 /// on the input's sharp edges, and deform_mesh adds it (report.memory_estimate_bytes) once it has found them.
 /// deform_mesh refuses a request above `options.voxelize.max_memory_bytes` (0: 90 % of available memory).
 std::uint64_t deform_memory_estimate(const TriangleMesh& mesh, const DeformOptions& options);
