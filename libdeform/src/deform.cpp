@@ -514,7 +514,7 @@ SparseVoxmap deform_voxmap(SparseVoxmap voxmap, const EditScript& script, const 
 
 namespace deform_internal {
 
-std::uint64_t memory_estimate(const TriangleMesh& mesh, const DeformOptions& options, double feature_bytes);
+std::uint64_t snapping_estimate(const TriangleMesh& mesh, const DeformOptions& options, double area, double feature_bytes);
 
 // Both halves of deform_mesh, also used by DeformSession (session.cpp), which keeps the voxelization. `estimate`:
 // deform_memory_estimate's, refused up front when above the limit.
@@ -537,11 +537,11 @@ TriangleMesh deform_voxelized(const TriangleMesh& mesh, SparseVoxmap voxmap, con
     const bool sharpen = options.extract.mesher == Mesher::features && options.extract.adaptivity == 0 && !options.extract.quads;
     if (sharpen) features = sharp_feature_surface(mesh, voxmap.voxel_size(), options.extract.feature_angle);
     if (sharpen && report.memory_estimate_bytes > 0) {
-        // What the feature mesher adds depends on the input's sharp edges, known only now: checked before the warp
-        // and extraction, against the memory still to come (a session's later calls, on a voxmap it kept, were
-        // checked on their first).
+        // What the feature mesher adds depends on the input's sharp edges, known only now: its share goes to the
+        // snapping phase of the estimate made up front, checked before the warp and extraction against the memory
+        // still to come (a session's later calls, on a voxmap it kept, were checked on their first).
         const double bytes = 24.0 * double(features.faces.vertices.size()) + 12.0 * double(features.faces.triangles.size()) + 48.0 * double(features.edges.size());
-        report.memory_estimate_bytes = memory_estimate(mesh, options, bytes);
+        report.memory_estimate_bytes = std::max(report.memory_estimate_bytes, snapping_estimate(mesh, options, surface_voxels(mesh, options.voxelize), bytes));
         const std::uint64_t now = resident_bytes(), held = now > report.resident_bytes_at_start ? now - report.resident_bytes_at_start : 0;
         const std::uint64_t limit = options.voxelize.max_memory_bytes;
         require_memory(limit ? report.memory_estimate_bytes : report.memory_estimate_bytes - std::min(held, report.memory_estimate_bytes), limit,
@@ -641,33 +641,37 @@ bool wants_source_surface(const TriangleMesh& mesh, const DeformOptions& options
     return (options.snap || (options.attributes && mesh.has_attributes())) && mesh.face_count() > 0;
 }
 
+// Measured peaks over the resident memory at the start (docs/benchmarks.md, Memory): the snapping tree peaks at
+// 392-396 bytes a face while CGAL builds it (276-360 once built); the warp and extraction at about 16 MiB
+// (allocator arenas and thread stacks; 20 counted, room for other machines' allocators) and 500-560 bytes per voxel
+// of the input's area (the voxmap's blocks in and out, the warp's 8-byte sums, the output mesh); snapping at up to
+// 853 per voxel of area (the scan at 128: two sheets, refinement), 520-600 on the bunny. Voxelizing's temporaries
+// are gone before the warp begins, the warp's before snapping, so the phases' largest counts, the tree beside each.
+constexpr double kArenas = 20.0 * 1024 * 1024, kTreePerFace = 400, kWarpPerVoxel = 560, kSnapPerVoxel = 950;
+
+double tree_bytes(const TriangleMesh& mesh, const DeformOptions& options) {
+    return wants_source_surface(mesh, options) ? kTreePerFace * double(mesh.face_count()) : 0.0;
+}
+
 } // namespace
 
 namespace deform_internal {
 
-/// deform_memory_estimate with the feature mesher's Hermite data known (`feature_bytes`, its vertices, triangles
-/// and edges): six times that is added to extracting and snapping (the bundled scan at 128 / 256: 48 / 63
-/// MiB over marching cubes' peak for 9.7 / 19.0 MiB of it).
-std::uint64_t memory_estimate(const TriangleMesh& mesh, const DeformOptions& options, double feature_bytes) {
-    // Measured peaks over the resident memory at the start (docs/benchmarks.md, Memory): the snapping tree peaks
-    // at 392-396 bytes a face while CGAL builds it (276-360 once built); the warp and extraction at about 16 MiB
-    // (allocator arenas and thread stacks; 20 counted, room for other machines' allocators) and 500-560 bytes per
-    // voxel of the input's area (the voxmap's blocks in and out, the warp's 8-byte sums, the output mesh);
-    // snapping at up to 853 per voxel of area (the scan at 128: two sheets, refinement), 520-600 on the bunny. Voxelizing's temporaries are gone before the warp
-    // begins, the warp's before snapping, so the phases' largest counts, the tree beside each.
-    VoxelizeOptions vo = options.voxelize;
-    const double area = surface_voxels(mesh, vo);
-    constexpr double kArenas = 20.0 * 1024 * 1024, kTreePerFace = 400, kWarpPerVoxel = 560, kSnapPerVoxel = 950;
-    const bool tree = wants_source_surface(mesh, options);
-    const double voxelizing = double(voxelize_memory_estimate(mesh, vo, true));
-    const double warping = kArenas + kWarpPerVoxel * area;
-    const double snapping = (tree ? kArenas + kSnapPerVoxel * area : 0.0) + 6 * feature_bytes;
-    return std::uint64_t(std::max({voxelizing, warping, snapping}) + (tree ? kTreePerFace * double(mesh.face_count()) : 0.0));
+/// deform_memory_estimate's last phase, extracting and snapping with the tree beside it, for an input of `area`
+/// voxels of area (surface_voxels); with the feature mesher's Hermite data once known (`feature_bytes`, its
+/// vertices, triangles and edges), six times that more (the bundled scan at 128 / 256: 48 / 63 MiB over marching
+/// cubes' peak for 9.7 / 19.0 MiB of it).
+std::uint64_t snapping_estimate(const TriangleMesh& mesh, const DeformOptions& options, double area, double feature_bytes) {
+    return std::uint64_t((wants_source_surface(mesh, options) ? kArenas + kSnapPerVoxel * area : 0.0) + 6 * feature_bytes + tree_bytes(mesh, options));
 }
 
 } // namespace deform_internal
 
-std::uint64_t deform_memory_estimate(const TriangleMesh& mesh, const DeformOptions& options) { return memory_estimate(mesh, options, 0); }
+std::uint64_t deform_memory_estimate(const TriangleMesh& mesh, const DeformOptions& options) {
+    const double area = surface_voxels(mesh, options.voxelize);
+    const double voxelizing = double(voxelize_memory_estimate(mesh, options.voxelize, true)), warping = kArenas + kWarpPerVoxel * area;
+    return std::max(std::uint64_t(std::max(voxelizing, warping) + tree_bytes(mesh, options)), snapping_estimate(mesh, options, area, 0));
+}
 
 TriangleMesh deform_mesh(const TriangleMesh& mesh, const EditScript& script, const DeformOptions& options, DeformReport& report) {
     const auto t = Clock::now();

@@ -278,26 +278,19 @@ std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::v
             const std::vector<std::uint32_t>& ring = around[v];
             // The loop: each triangle's side across from v, chained into one closed cycle (not so at the region's
             // rim, whose triangles outside it would move unseen).
-            std::unordered_map<std::int32_t, std::int32_t> next;
+            std::vector<std::pair<std::int32_t, std::int32_t>> next;
             Eigen::Vector3d reference_sum = Eigen::Vector3d::Zero(), middle = Eigen::Vector3d::Zero(), plane = Eigen::Vector3d::Zero();
             for (const std::uint32_t g : ring) {
                 const Triangle& t = triangles[g];
                 const int k = t[0] == v ? 0 : t[1] == v ? 1 : 2;
                 const std::int32_t a = t[std::size_t((k + 1) % 3)];
-                next.emplace(a, t[std::size_t((k + 2) % 3)]);
+                next.push_back({a, t[std::size_t((k + 2) % 3)]});
                 reference_sum += reference({t[0], t[1], t[2]});
                 middle += vertices[std::size_t(a)];
             }
-            if (ring.size() < 3 || next.size() != ring.size() || reference_sum.isZero()) continue;
-            std::int32_t w = next.begin()->first;
-            std::size_t steps = 0;
-            for (; steps < ring.size(); ++steps) {
-                const auto it = next.find(w);
-                if (it == next.end()) break;
-                w = it->second;
-                if (w == next.begin()->first) break;
-            }
-            if (steps + 1 != ring.size() || w != next.begin()->first) continue;
+            std::sort(next.begin(), next.end());
+            const bool twice = std::adjacent_find(next.begin(), next.end(), [](const auto& x, const auto& y) { return x.first == y.first; }) != next.end();
+            if (ring.size() < 3 || twice || reference_sum.isZero() || closed_cycle(next).empty()) continue;
             middle /= double(ring.size());
             for (const std::uint32_t g : ring) {
                 const Eigen::Vector3d n = area_normal(vertices, triangles[g]);

@@ -524,13 +524,8 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             i = j;
         }
         if (next.size() < 3) return;
-        std::vector<std::int32_t> cycle{next.front().first};
-        while (cycle.size() <= next.size()) {
-            const auto it = std::lower_bound(next.begin(), next.end(), std::pair(cycle.back(), std::numeric_limits<std::int32_t>::min()));
-            if (it == next.end() || it->first != cycle.back() || it->second == cycle.front()) break;
-            cycle.push_back(it->second);
-        }
-        if (cycle.size() != next.size()) return; // not one disk
+        std::vector<std::int32_t> cycle = closed_cycle(next);
+        if (cycle.empty()) return; // not one disk
         // Where the point may go: its cells, or for a corner the cells next to them, where its tip may hide. An
         // edge's point, with the input's normals, may lie most of a voxel outside: where the edge clips a grid
         // face none of whose corners is inside, the two cells it joins share no triangle, and marching cubes

@@ -8,6 +8,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <tbb/parallel_for.h>
 #include <utility>
@@ -48,6 +49,20 @@ std::vector<std::uint32_t> select_in_parallel(std::size_t n, const Keep& keep) {
     out.reserve(total);
     for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
     return out;
+}
+
+/// The cycle the sides `next` (a -> b, sorted by a, no a twice, at least one) chain into from the first a, or an
+/// empty list where they do not close one cycle through all of them: a fan's loop, the loop around a vertex.
+inline std::vector<std::int32_t> closed_cycle(const std::vector<std::pair<std::int32_t, std::int32_t>>& next) {
+    std::vector<std::int32_t> cycle{next.front().first};
+    while (cycle.size() <= next.size()) {
+        const auto it = std::lower_bound(next.begin(), next.end(), std::pair(cycle.back(), std::numeric_limits<std::int32_t>::min()));
+        if (it == next.end() || it->first != cycle.back()) return {};
+        if (it->second == cycle.front()) break;
+        cycle.push_back(it->second);
+    }
+    if (cycle.size() != next.size()) return {};
+    return cycle;
 }
 
 /// The grid of 8^3-cell blocks over a voxmap and 8 cells around it: CoarseMarks and CellBuckets index by it.
