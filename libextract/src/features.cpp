@@ -434,15 +434,26 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     // A corner whose tip pokes into a cell no grid corner of which is inside lies outside every cell around it:
     // the loops around it that agree on it (rank 3, within a fifth of a voxel) become one patch, fanned to it.
     internal::DisjointSets group(features.size());
+    // Loops beside each other that found one point, of any rank (a corner where sharp edges meet, found from cells
+    // on either side of it): as two fans, their centres coincide and the triangles between them fold back to back
+    // (the L block's notch, where it meets the top face). Their patches are fanned as one where that is one disk.
+    std::vector<std::pair<int, int>> coincident;
     {
         std::map<std::int32_t, std::vector<int>> corner_loops_at; // vertex -> rank-3 loops using it
+        std::map<std::int32_t, std::vector<int>> loops_at;        // vertex -> loops using it
         for (std::size_t i = 0; i < features.size(); ++i)
-            if (features[i].rank == 3)
-                for (auto f : features[i].triangles)
-                    for (auto v : mesh.triangles[f]) corner_loops_at[v].push_back(int(i));
+            for (auto f : features[i].triangles)
+                for (auto v : mesh.triangles[f]) {
+                    loops_at[v].push_back(int(i));
+                    if (features[i].rank == 3) corner_loops_at[v].push_back(int(i));
+                }
         for (const auto& [v, ls] : corner_loops_at)
             for (std::size_t a = 1; a < ls.size(); ++a)
                 if ((features[std::size_t(ls[0])].point - features[std::size_t(ls[a])].point).norm() < 0.2 * h) group.join(std::size_t(ls[a]), std::size_t(ls[0]));
+        for (const auto& [v, ls] : loops_at)
+            for (std::size_t a = 0; a < ls.size(); ++a)
+                for (std::size_t b = a + 1; b < ls.size(); ++b)
+                    if ((features[std::size_t(ls[a])].point - features[std::size_t(ls[b])].point).norm() < 0.01 * h) coincident.push_back({ls[a], ls[b]});
     }
     std::map<std::size_t, std::vector<int>> patches;
     for (std::size_t i = 0; i < features.size(); ++i) patches[group.find(i)].push_back(int(i));
@@ -489,12 +500,21 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         return Eigen::Vector3d(point + t * d);
     };
     std::vector<const std::vector<int>*> patch_list;
-    for (const auto& [r, members] : patches) patch_list.push_back(&members);
+    std::vector<std::size_t> patch_of(features.size());
+    for (const auto& [r, members] : patches) {
+        for (const int i : members) patch_of[std::size_t(i)] = patch_list.size();
+        patch_list.push_back(&members);
+    }
+    internal::DisjointSets beside(patch_list.size());
+    for (const auto& [a, b] : coincident) beside.join(patch_of[std::size_t(b)], patch_of[std::size_t(a)]);
+    std::map<std::size_t, std::vector<std::size_t>> joined_patches; // root -> its patches, in order
+    for (std::size_t p = 0; p < patch_list.size(); ++p) joined_patches[beside.find(p)].push_back(p);
+    std::vector<const std::vector<std::size_t>*> joined_list;
+    for (const auto& [r, ps] : joined_patches) joined_list.push_back(&ps);
     std::vector<Fan> fans(patch_list.size());
     auto directed = [](std::int32_t a, std::int32_t b) { return std::uint64_t(std::uint32_t(a)) << 32 | std::uint32_t(b); };
-    tbb::parallel_for(std::size_t(0), fans.size(), [&](std::size_t p) {
-        const std::vector<int>& members = *patch_list[p];
-        Fan& fan = fans[p];
+    // A patch's fan; its cycle left empty where the patch is not one disk or the point strays.
+    auto make_fan = [&](const std::vector<int>& members, Fan& fan) {
         std::vector<std::uint32_t>& tris = fan.triangles;
         Eigen::Vector3d point = Eigen::Vector3d::Zero();
         Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
@@ -543,6 +563,17 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             }
         fan.cycle = std::move(cycle);
         fan.point = point;
+    };
+    tbb::parallel_for(std::size_t(0), joined_list.size(), [&](std::size_t k) {
+        const std::vector<std::size_t>& ps = *joined_list[k];
+        if (ps.size() > 1) {
+            std::vector<int> members;
+            for (const std::size_t p : ps) members.insert(members.end(), patch_list[p]->begin(), patch_list[p]->end());
+            make_fan(members, fans[ps[0]]);
+            if (!fans[ps[0]].cycle.empty()) return;
+            fans[ps[0]] = Fan{};
+        }
+        for (const std::size_t p : ps) make_fan(*patch_list[p], fans[p]);
     });
     // The region the builds below rewrite: the cells within kReach of a cell where something changes (a fan's
     // loop, a sharp edge, a vertex moved onto the feature surface, a triangle folded against its corners'
