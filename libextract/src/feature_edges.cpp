@@ -256,8 +256,11 @@ std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::v
     }
     // Folds no flip undoes: a corner whose triangles all lie in one plane, but which lies past the side of its
     // loop (fans meeting at a concave edge leave a vertex of marching cubes with three triangles so, its loop's
-    // sides already edges, where a flip would make one twice). It moves to the middle of its loop when every one of
-    // its triangles then faces the way the plane does: the surface is the same plane, only its triangles change.
+    // sides already edges, where a flip would make one twice; a fan's centre on a sharp edge with three triangles
+    // on one face). It moves to the middle of its loop when every one of its triangles then faces the way the plane
+    // does: the surface is the same plane, only its triangles change. One plane to a thousandth of the loop's size:
+    // a face carried through a warp is flat only that far (the cube turned by the warp, whose corners lie 1e-3
+    // voxel off their face's plane).
     std::vector<std::uint32_t> still;
     for (const std::uint32_t f : bad)
         if (folded(triangles[f])) still.push_back(f);
@@ -303,7 +306,7 @@ std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::v
                 size = std::max(size, (vertices[std::size_t(a)] - middle).norm());
                 off = std::max(off, std::abs((vertices[std::size_t(a)] - middle).dot(unit)));
             }
-            if (!(off <= 1e-6 * size)) continue;
+            if (!(off <= 1e-3 * size)) continue;
             const Eigen::Vector3d was = vertices[std::size_t(v)];
             vertices[std::size_t(v)] = middle;
             const bool upright = std::all_of(ring.begin(), ring.end(), [&](std::uint32_t g) {
@@ -311,6 +314,58 @@ std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::v
             });
             if (!upright) {
                 vertices[std::size_t(v)] = was;
+                continue;
+            }
+            rewritten.insert(rewritten.end(), ring.begin(), ring.end());
+        }
+    // Folds left where a corner lies between two of its neighbours on one line (a sharp edge: fans' centres and
+    // splits on it): the corner slides along that line, which keeps it on the edge. How each of its triangles faces
+    // its corners' normals is linear in the slide, so the slides that unfold them all form an interval; the corner
+    // takes the one nearest none, a quarter of the interval inside its ends, and stays between the two.
+    for (const std::uint32_t f : still)
+        for (int c = 0; c < 3 && folded(triangles[f]); ++c) {
+            const std::int32_t v = triangles[f][std::size_t(c)];
+            const std::vector<std::uint32_t>& ring = around[v];
+            const Eigen::Vector3d x = vertices[std::size_t(v)];
+            std::vector<std::int32_t> neighbours;
+            for (const std::uint32_t g : ring)
+                for (const auto w : triangles[g])
+                    if (w != v) neighbours.push_back(w);
+            std::sort(neighbours.begin(), neighbours.end());
+            neighbours.erase(std::unique(neighbours.begin(), neighbours.end()), neighbours.end());
+            // The two neighbours whose line passes nearest the corner (to a fiftieth of their distance), the
+            // corner between them.
+            double nearest = std::numeric_limits<double>::infinity();
+            Eigen::Vector3d p = x, q = x;
+            for (std::size_t i = 0; i < neighbours.size(); ++i)
+                for (std::size_t j = i + 1; j < neighbours.size(); ++j) {
+                    const Eigen::Vector3d &a = vertices[std::size_t(neighbours[i])], &b = vertices[std::size_t(neighbours[j])];
+                    const double length = (b - a).norm(), along = (x - a).dot(b - a) / (length * length);
+                    const double off = (x - a - along * (b - a)).norm() / length;
+                    if (along > 0 && along < 1 && off < 0.02 && off < nearest) nearest = off, p = a, q = b;
+                }
+            if (!std::isfinite(nearest)) continue;
+            const Eigen::Vector3d d = (q - p).normalized();
+            double lo_t = (p - x).dot(d), hi_t = (q - x).dot(d); // between the two
+            bool feasible = true;
+            for (const std::uint32_t g : ring) {
+                const Triangle& t = triangles[g];
+                const int k = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+                const Eigen::Vector3d m = reference({t[0], t[1], t[2]});
+                if (m.isZero()) continue;
+                const Eigen::Vector3d pa = vertices[std::size_t(t[std::size_t((k + 1) % 3)])] - x, pb = vertices[std::size_t(t[std::size_t((k + 2) % 3)])] - x;
+                // ((pa - s d) x (pb - s d)) . m = c0 + e s
+                const double c0 = pa.cross(pb).dot(m), e = -(d.cross(pb) + pa.cross(d)).dot(m);
+                if (e > 0) lo_t = std::max(lo_t, -c0 / e);
+                else if (e < 0) hi_t = std::min(hi_t, -c0 / e);
+                else feasible &= c0 > 0;
+            }
+            if (!feasible || !(lo_t < hi_t)) continue;
+            const double inside = 0.25 * (hi_t - lo_t);
+            const double slide = std::clamp(0.0, lo_t + inside, hi_t - inside);
+            vertices[std::size_t(v)] = x + slide * d;
+            if (std::any_of(ring.begin(), ring.end(), [&](std::uint32_t g) { return folded(triangles[g]); })) {
+                vertices[std::size_t(v)] = x;
                 continue;
             }
             rewritten.insert(rewritten.end(), ring.begin(), ring.end());
