@@ -514,8 +514,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     std::vector<Fan> fans(patch_list.size());
     auto directed = [](std::int32_t a, std::int32_t b) { return std::uint64_t(std::uint32_t(a)) << 32 | std::uint32_t(b); };
     // A patch's fan; its cycle left empty where the patch is not one disk or the point strays.
-    auto make_fan = [&](const std::vector<int>& members, Fan& fan) {
+    auto make_fan = [&](const std::vector<int>& members, Fan& fan, const Eigen::Vector3d* tip, const std::vector<std::uint32_t>& extra) {
         std::vector<std::uint32_t>& tris = fan.triangles;
+        tris = extra;
         Eigen::Vector3d point = Eigen::Vector3d::Zero();
         Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
         for (int i : members) {
@@ -546,6 +547,20 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         if (next.size() < 3) return;
         std::vector<std::int32_t> cycle = closed_cycle(next);
         if (cycle.empty()) return; // not one disk
+        if (tip) {
+            // Gathered by distance, a tip's patch may also hold a closed piece beside it, or a handle, which one
+            // boundary cycle does not show: a disk has V - E + F = 1.
+            std::vector<std::int32_t> corners;
+            for (const auto f : tris)
+                for (const auto v : mesh.triangles[f]) corners.push_back(v);
+            std::sort(corners.begin(), corners.end());
+            const auto v_count = std::ptrdiff_t(std::unique(corners.begin(), corners.end()) - corners.begin());
+            const auto e_count = std::ptrdiff_t((3 * tris.size() + next.size()) / 2);
+            if (v_count - e_count + std::ptrdiff_t(tris.size()) != 1) return;
+            fan.cycle = std::move(cycle);
+            fan.point = *tip; // beyond the loops' cells by as far as they fell short of it
+            return;
+        }
         // Where the point may go: its cells, or for a corner the cells next to them, where its tip may hide. An
         // edge's point, with the input's normals, may lie most of a voxel outside: where the edge clips a grid
         // face none of whose corners is inside, the two cells it joins share no triangle, and marching cubes
@@ -569,12 +584,142 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         if (ps.size() > 1) {
             std::vector<int> members;
             for (const std::size_t p : ps) members.insert(members.end(), patch_list[p]->begin(), patch_list[p]->end());
-            make_fan(members, fans[ps[0]]);
+            make_fan(members, fans[ps[0]], nullptr, {});
             if (!fans[ps[0]].cycle.empty()) return;
             fans[ps[0]] = Fan{};
         }
-        for (const std::size_t p : ps) make_fan(*patch_list[p], fans[p]);
+        for (const std::size_t p : ps) make_fan(*patch_list[p], fans[p], nullptr, {});
     });
+    // Tips voxelizing lost: a corner of the input where three or more sharp edges meet (an end shared by three of
+    // the feature surface's edge segments, to round-off) that no fan reaches, its edges' fans ending short of it (a
+    // tetrahedron's corner, thinner than a voxel for about a voxel; or a fan at the corner that is no disk). The
+    // patches of the loops within a voxel and a half of the nearest's cell (and those joined with them) become one
+    // fan to the corner, where that is one disk; otherwise they stay as they are.
+    if (options.feature_surface && !features.empty()) {
+        // Each end of a segment with its other end, by x.
+        std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> ends;
+        for (const auto& [a, b] : options.feature_surface->edges) ends.push_back({a, b}), ends.push_back({b, a});
+        std::sort(ends.begin(), ends.end(), [](const auto& x, const auto& y) { return x.first[0] < y.first[0]; });
+        const double tol = 1e-9 * h; // a segment cut from either end leaves its ends 1e-15 voxel apart
+        auto outside_cell = [](const Eigen::Vector3d& q, const Index3& cell) { // voxels from q (index units) to the cell
+            const Eigen::Vector3d lo{double(cell[0]), double(cell[1]), double(cell[2])};
+            return (q - q.cwiseMax(lo).cwiseMin(lo + Eigen::Vector3d::Ones())).norm();
+        };
+        // The loops come in order of their cells' keys: those of a cell are one run.
+        auto loops_in = [&](const Index3& cell) {
+            const std::uint64_t key = cell_key(cell);
+            const auto lo = std::lower_bound(features.begin(), features.end(), key, [](const Loop& l, std::uint64_t k) { return cell_key(l.cell) < k; });
+            auto hi = lo;
+            while (hi != features.end() && cell_key(hi->cell) == key) ++hi;
+            return std::pair(std::size_t(lo - features.begin()), std::size_t(hi - features.begin()));
+        };
+        struct Tip {
+            Eigen::Vector3d corner;
+            double nearest;                 ///< voxels from the corner to the nearest loop's cell
+            std::vector<std::size_t> ps;    ///< the patches it joins, ascending
+            std::vector<int> members;       ///< their loops
+        };
+        std::vector<std::uint8_t> in_tip(patch_list.size(), 0);
+        auto apply = [&](const std::vector<std::size_t>& ps, Fan&& tip) {
+            for (const std::size_t p : ps) fans[p] = Fan{}, in_tip[p] = 1;
+            fans[ps[0]] = std::move(tip);
+        };
+        std::vector<std::size_t> group_of(patch_list.size()); // a patch's group of patches beside each other
+        for (std::size_t k = 0; k < joined_list.size(); ++k)
+            for (const std::size_t p : *joined_list[k]) group_of[p] = k;
+        std::vector<Tip> holed; // whose loops leave a hole, for the second pass
+        std::vector<Eigen::Vector3d> leaving;
+        for (std::size_t i = 0; i < ends.size(); ++i) {
+            const Eigen::Vector3d& corner = ends[i].first;
+            bool first = true; // of the ends at this point
+            for (std::size_t k = i; k-- > 0 && corner[0] - ends[k].first[0] <= tol;) first &= (ends[k].first - corner).norm() > tol;
+            if (!first) continue;
+            leaving.clear(); // the edges' directions from the point
+            Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+            for (std::size_t k = i; k < ends.size() && ends[k].first[0] - corner[0] <= tol; ++k)
+                if ((ends[k].first - corner).norm() <= tol) leaving.push_back((ends[k].second - corner).normalized()), axis += leaving.back();
+            // A tip: three edges or more, no two along one line (20 degrees), all within 63 degrees of their mean
+            // (a triangular prism's corner: 60; a cube's: 55). Where a scan's creases meet on a smoother part they
+            // spread wider, and are left to the fans.
+            if (leaving.size() < 3) continue;
+            bool tip_like = true;
+            for (std::size_t a = 0; a < leaving.size(); ++a) {
+                tip_like &= leaving[a].dot(axis.normalized()) >= 0.45;
+                for (std::size_t b = a + 1; b < leaving.size(); ++b) tip_like &= leaving[a].dot(leaving[b]) <= 0.94;
+            }
+            if (!tip_like) continue;
+            // Each loop within three cells: how far outside its cell the corner lies, in voxels.
+            const Eigen::Vector3d q = voxmap.index_of(corner);
+            const Index3 c = cell_containing(q);
+            Tip tip{corner, std::numeric_limits<double>::infinity(), {}, {}};
+            bool reached = false;
+            std::vector<std::pair<double, std::size_t>> near;
+            for (std::int64_t dz = -3; dz <= 3; ++dz)
+                for (std::int64_t dy = -3; dy <= 3; ++dy)
+                    for (std::int64_t dx = -3; dx <= 3; ++dx)
+                        for (auto [l, end] = loops_in({c[0] + dx, c[1] + dy, c[2] + dz}); l < end; ++l) {
+                            const double d = outside_cell(q, features[l].cell);
+                            const Fan& fan = fans[patch_of[l]];
+                            reached |= !fan.cycle.empty() && (fan.point - corner).norm() <= 0.3 * h;
+                            tip.nearest = std::min(tip.nearest, d), near.push_back({d, l});
+                        }
+            if (reached || !(tip.nearest < 2.5)) continue;
+            // The patches to join: those of the loops near, each with its whole group of patches beside each other.
+            for (const auto& [d, l] : near)
+                if (d <= tip.nearest + 1.5)
+                    for (const std::size_t p : *joined_list[group_of[patch_of[l]]]) tip.ps.push_back(p);
+            std::sort(tip.ps.begin(), tip.ps.end());
+            tip.ps.erase(std::unique(tip.ps.begin(), tip.ps.end()), tip.ps.end());
+            if (std::any_of(tip.ps.begin(), tip.ps.end(), [&](std::size_t p) { return in_tip[p] != 0; })) continue; // another corner's
+            for (const std::size_t p : tip.ps) tip.members.insert(tip.members.end(), patch_list[p]->begin(), patch_list[p]->end());
+            Fan fan;
+            make_fan(tip.members, fan, &tip.corner, {});
+            if (!fan.cycle.empty()) apply(tip.ps, std::move(fan));
+            else holed.push_back(std::move(tip));
+        }
+        // The loops leave holes where cells between them hold marching cubes' triangles and no loop (their normals
+        // agree): those join too, where no other fan has them. Only the cells around these corners are looked up.
+        if (!holed.empty()) {
+            CoarseMarks around(voxmap);
+            for (const Tip& tip : holed) {
+                const Index3 c = cell_containing(voxmap.index_of(tip.corner));
+                around.mark({c[0] - 3, c[1] - 3, c[2] - 3}, {c[0] + 3, c[1] + 3, c[2] + 3});
+            }
+            std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> looked_in_cell;
+            for (std::size_t k = 0; k < looked.size(); ++k)
+                if (const Index3 cell = key_cell(looked_cell[k]); around.any(cell, cell)) looked_in_cell[looked_cell[k]].push_back(looked[k]);
+            std::unordered_map<std::uint32_t, std::size_t> fan_of_triangle; // for the triangles looked up only
+            for (std::size_t p = 0; p < fans.size(); ++p)
+                for (const std::uint32_t f : fans[p].triangles) {
+                    const auto k = std::size_t(std::lower_bound(looked.begin(), looked.end(), f) - looked.begin()); // every fan's triangle is looked at
+                    if (const Index3 cell = key_cell(looked_cell[k]); around.any(cell, cell)) fan_of_triangle[f] = p;
+                }
+            for (const Tip& tip : holed) {
+                if (std::any_of(tip.ps.begin(), tip.ps.end(), [&](std::size_t p) { return in_tip[p] != 0; })) continue;
+                const Eigen::Vector3d q = voxmap.index_of(tip.corner);
+                const Index3 c = cell_containing(q);
+                std::vector<std::uint32_t> extra;
+                bool taken = false;
+                for (std::int64_t dz = -3; dz <= 3; ++dz)
+                    for (std::int64_t dy = -3; dy <= 3; ++dy)
+                        for (std::int64_t dx = -3; dx <= 3; ++dx) {
+                            const Index3 cell{c[0] + dx, c[1] + dy, c[2] + dz};
+                            if (outside_cell(q, cell) > tip.nearest + 1.5) continue;
+                            if (const auto it = looked_in_cell.find(cell_key(cell)); it != looked_in_cell.end())
+                                for (const std::uint32_t f : it->second) {
+                                    if (const auto owner = fan_of_triangle.find(f); owner == fan_of_triangle.end()) extra.push_back(f);
+                                    else taken |= !std::binary_search(tip.ps.begin(), tip.ps.end(), owner->second);
+                                }
+                        }
+                if (taken || extra.empty()) continue;
+                Fan fan;
+                make_fan(tip.members, fan, &tip.corner, extra);
+                if (fan.cycle.empty()) continue;
+                for (const std::uint32_t f : fan.triangles) fan_of_triangle[f] = tip.ps[0];
+                apply(tip.ps, std::move(fan));
+            }
+        }
+    }
     // The region the builds below rewrite: the cells within kReach of a cell where something changes (a fan's
     // loop, a sharp edge, a vertex moved onto the feature surface, a triangle folded against its corners'
     // normals), whole cells, each triangle in the cell of its centre as marching cubes made it (as uncross files
