@@ -691,7 +691,8 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             std::unordered_map<std::uint32_t, std::size_t> fan_of_triangle; // for the triangles looked up only
             for (std::size_t p = 0; p < fans.size(); ++p)
                 for (const std::uint32_t f : fans[p].triangles) {
-                    const auto k = std::size_t(std::lower_bound(looked.begin(), looked.end(), f) - looked.begin()); // every fan's triangle is looked at
+                    const auto k = std::size_t(std::lower_bound(looked.begin(), looked.end(), f) - looked.begin());
+                    if (k == looked.size() || looked[k] != f) continue; // not so: every fan's triangle is looked at
                     if (const Index3 cell = key_cell(looked_cell[k]); around.any(cell, cell)) fan_of_triangle[f] = p;
                 }
             for (const Tip& tip : holed) {
