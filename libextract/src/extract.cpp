@@ -67,8 +67,9 @@ TriangleMesh extract(const SparseVoxmap& voxmap, const ExtractOptions& options) 
     Progress progress(options.progress, "extract");
     progress.report(0.0);
     if (options.adaptivity == 0 && !options.quads) {
-        TriangleMesh mesh = extract_internal::marching_cubes(voxmap, float(options.isovalue), progress);
-        if (options.mesher == Mesher::features) return extract_internal::restore_features(std::move(mesh), voxmap, options);
+        std::vector<extract_internal::MarchingBlock> blocks;
+        TriangleMesh mesh = extract_internal::marching_cubes(voxmap, float(options.isovalue), progress, options.mesher == Mesher::features ? &blocks : nullptr);
+        if (options.mesher == Mesher::features) return extract_internal::restore_features(std::move(mesh), voxmap, options, blocks);
         return mesh; // moved, with its spare capacity (a conditional expression would copy it)
     }
     openvdb::initialize();

@@ -47,6 +47,8 @@ public:
     /// False when no cell within one of `c` holds a triangle (true may still mean none: blocks are coarse): hit()
     /// and nearest() around it would find nothing.
     bool near(const Index3& c) const { return near_.any(c, c); }
+    /// Likewise for the cells in [lo, hi].
+    bool near(const Index3& lo, const Index3& hi) const { return near_.any(lo, hi); }
     /// Where the segment a -> b meets the surface (parameter t in [0, 1] and the face's unit normal), the meeting
     /// nearest to `near_t`; false when it meets none of the triangles in the voxels given.
     bool hit(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const std::array<Index3, 2>& voxels, double near_t, double& t_out, Eigen::Vector3d& normal) const {
@@ -120,6 +122,10 @@ public:
                     }
                     x += run;
                 }
+    }
+    /// False when no cell in [lo, hi] is in the set (true may still mean none: blocks are coarse).
+    bool any(const Index3& lo, const Index3& hi) const {
+        return grid_.visit_blocks(lo, hi, [&](std::size_t b) { return slot_[b] >= 0; });
     }
     bool contains(const Index3& c) const {
         const std::int64_t b = grid_.block_of(c);
@@ -234,7 +240,7 @@ private:
 
 bool on_grid_edge(const SparseVoxmap& voxmap, const Eigen::Vector3d& p) { return edge_of(voxmap, p).axis >= 0; }
 
-TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options) {
+TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options, const std::vector<MarchingBlock>& blocks) {
     const double h = voxmap.voxel_size();
     const double cos_feature = std::cos(options.feature_angle * M_PI / 180.0);
     const std::size_t nv = mesh.vertices.size();
@@ -247,14 +253,46 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     tbb::enumerable_thread_specific<std::vector<std::pair<std::uint32_t, Eigen::Vector3d>>> moved_by_thread;
     std::unique_ptr<TriangleGrid> grid;
     if (options.feature_surface && !options.feature_surface->faces.triangles.empty()) grid = std::make_unique<TriangleGrid>(options.feature_surface->faces, voxmap);
+    const std::size_t nt = mesh.triangles.size();
+    // The runs of marching cubes' vertices and triangles, by block, that the passes over all of them visit: given a
+    // feature surface, those of blocks within two cells of a cell it marks as near. A vertex of a block lies on an
+    // edge of one of its cells; one farther off gets no normal, and no triangle of its has a corner with one, so
+    // none is looked at; the vertices within a cell of those that get one (a loop's corners, which it asks whether
+    // they lie on a grid edge) are in these blocks too. The output is the same; at 512 the bunny ear's passes visit
+    // 30 % of the vertices, and its extraction (less snapping) took 0.409 s against 0.425 (medians of 5).
+    auto runs_where = [&](const auto& wanted) {
+        std::vector<std::pair<std::uint32_t, std::uint32_t>> vertex_runs, triangle_runs;
+        for (std::size_t n = 0; n < blocks.size(); ++n) {
+            const Index3& c = blocks[n].first_cell;
+            if (!wanted(c)) continue;
+            const std::uint32_t v_end = n + 1 < blocks.size() ? blocks[n + 1].first_vertex : std::uint32_t(nv);
+            const std::uint32_t t_end = n + 1 < blocks.size() ? blocks[n + 1].first_triangle : std::uint32_t(nt);
+            // Blocks one after another join into runs of some thousands, each a task.
+            auto add = [](auto& runs, std::uint32_t first, std::uint32_t end) {
+                if (!runs.empty() && runs.back().second == first && end - runs.back().first <= 4096) runs.back().second = end;
+                else runs.push_back({first, end});
+            };
+            add(vertex_runs, blocks[n].first_vertex, v_end), add(triangle_runs, blocks[n].first_triangle, t_end);
+        }
+        if (blocks.empty()) // not cut in blocks
+            for (std::uint32_t i = 0; i < std::max(nv, nt); i += 4096) {
+                if (i < nv) vertex_runs.push_back({i, std::uint32_t(std::min<std::size_t>(nv, i + 4096))});
+                if (i < nt) triangle_runs.push_back({i, std::uint32_t(std::min<std::size_t>(nt, i + 4096))});
+            }
+        return std::pair(vertex_runs, triangle_runs);
+    };
+    constexpr std::int64_t kBlockCells = 8;
+    const auto [near_vertices, near_triangles] = runs_where([&](const Index3& c) {
+        return !grid || grid->near({c[0] - 2, c[1] - 2, c[2] - 2}, {c[0] + kBlockCells + 1, c[1] + kBlockCells + 1, c[2] + kBlockCells + 1});
+    });
 
     // Normals, and near the feature surface the crossings themselves: where the vertex's grid edge meets it (the
     // density's linear zero is off near an edge or corner, where the distance it ramps is not linear along the
     // grid edge). Given a feature surface, only near it: a smooth warp makes no sharp part the input's sharp edges
     // do not carry, and this pass over every vertex was a third of the mesher's cost. A vertex left without a
     // normal is in no candidate cell's loop.
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv, 4096), [&](const auto& range) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+    tbb::parallel_for(std::size_t(0), near_vertices.size(), [&](std::size_t r) {
+        for (std::size_t i = near_vertices[r].first; i != near_vertices[r].second; ++i) {
             GridEdge e = edge_of(voxmap, mesh.vertices[i]);
             flags[i] = e.axis >= 0 ? kOnEdge : 0;
             if (e.axis < 0 || (grid && !grid->near(e.low))) continue;
@@ -308,11 +346,10 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     // bunny ear's peak at 256 from 161 to 157 MiB).
     const bool on_feature_surface = grid != nullptr;
     grid.reset();
-    const std::size_t nt = mesh.triangles.size();
 
     // The triangles looked at from here on: those with a corner that has a normal (all, without a feature surface).
     // Each one's cell, and whether its corners' normals disagree: its cell is then a candidate.
-    const std::vector<std::uint32_t> looked = select_in_parallel(nt, [&](std::size_t f) {
+    const std::vector<std::uint32_t> looked = select_in_runs(near_triangles, [&](std::size_t f) {
         const auto& t = mesh.triangles[f];
         return known(std::size_t(t[0])) || known(std::size_t(t[1])) || known(std::size_t(t[2]));
     });
@@ -757,7 +794,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         const Index3 c = key_cell(key);
         region_cells.insert({c[0] - kReach, c[1] - kReach, c[2] - kReach}, {c[0] + kReach, c[1] + kReach, c[2] + kReach});
     }
-    const std::vector<std::uint32_t> region = select_in_parallel(nt, [&](std::size_t f) { return region_cells.contains(home_cell(mesh.triangles[f])); });
+    // Each triangle's home cell lies in its block (a cell beyond, where its corners are all on one face).
+    const auto region_triangles_runs = runs_where([&](const Index3& c) { return region_cells.any({c[0] - 1, c[1] - 1, c[2] - 1}, {c[0] + kBlockCells, c[1] + kBlockCells, c[2] + kBlockCells}); }).second;
+    const std::vector<std::uint32_t> region = select_in_runs(region_triangles_runs, [&](std::size_t f) { return region_cells.contains(home_cell(mesh.triangles[f])); });
     if (region.empty()) return mesh;
     // The region as a mesh of its own: its vertices in their order, then those the builds add.
     std::vector<std::uint8_t> in_region(nv, 0);

@@ -4,6 +4,8 @@
 
 #include <voxwarp/extract.h>
 
+#include "marching_cubes.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -42,6 +44,23 @@ std::vector<std::uint32_t> select_in_parallel(std::size_t n, const Keep& keep) {
     tbb::parallel_for(std::size_t(0), parts.size(), [&](std::size_t b) {
         for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
             if (keep(i)) parts[b].push_back(std::uint32_t(i));
+    });
+    std::size_t total = 0;
+    for (const auto& p : parts) total += p.size();
+    std::vector<std::uint32_t> out;
+    out.reserve(total);
+    for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
+    return out;
+}
+
+/// The indices in the ascending, disjoint runs [first, second) for which `keep` holds, ascending: runs in parallel,
+/// then joined (the result does not depend on the thread count).
+template <class Keep>
+std::vector<std::uint32_t> select_in_runs(const std::vector<std::pair<std::uint32_t, std::uint32_t>>& runs, const Keep& keep) {
+    std::vector<std::vector<std::uint32_t>> parts(runs.size());
+    tbb::parallel_for(std::size_t(0), runs.size(), [&](std::size_t r) {
+        for (std::uint32_t i = runs[r].first; i < runs[r].second; ++i)
+            if (keep(std::size_t(i))) parts[r].push_back(i);
     });
     std::size_t total = 0;
     for (const auto& p : parts) total += p.size();
@@ -203,7 +222,9 @@ bool on_grid_edge(const SparseVoxmap& voxmap, const Eigen::Vector3d& p);
 
 /// `mesh`, marching cubes' output for `voxmap` (every vertex on a grid edge, every triangle in one cell), with
 /// the cells that hold a sharp part re-meshed as fans around their feature points and those points joined.
-TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options);
+/// `blocks`: where marching cubes put each block's vertices and triangles; the passes over all of them visit only
+/// the blocks near the feature surface (all of them without one), and the output is the same.
+TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options, const std::vector<MarchingBlock>& blocks);
 
 /// The feature mesher's last step (feature_edges.cpp): each mesh edge that passes under one of the input's sharp
 /// `edges` (world units), its ends on either side, is split at the sharp edge's point nearest it; edges whose ends'

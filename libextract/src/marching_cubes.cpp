@@ -193,7 +193,7 @@ void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* 
 
 } // namespace
 
-TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress) {
+TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress, std::vector<MarchingBlock>* runs) {
     const auto& dims = voxmap.dims();
     const std::array<std::int64_t, 3> count{(dims[0] + 1 + kCells - 1) / kCells, (dims[1] + 1 + kCells - 1) / kCells,
                                             (dims[2] + 1 + kCells - 1) / kCells};
@@ -245,7 +245,9 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
     progress.report(0.5);
 
     std::uint64_t vertices = 0, triangles = 0;
-    for (Block& block : blocks) {
+    for (std::size_t n = 0; n < blocks.size(); ++n) {
+        Block& block = blocks[n];
+        if (runs) runs->push_back({first_corner(n), std::uint32_t(vertices), std::uint32_t(triangles)});
         block.first_vertex = vertices, vertices += block.edges + block.centres;
         block.first_triangle = triangles, triangles += block.triangles;
     }
