@@ -35,24 +35,6 @@ inline Index3 cell_containing(const Eigen::Vector3d& q) {
     return {std::int64_t(std::floor(q.x())), std::int64_t(std::floor(q.y())), std::int64_t(std::floor(q.z()))};
 }
 
-/// The indices in [0, n) for which `keep` holds, ascending: fixed blocks in parallel (the result does not depend on
-/// the thread count), then joined. For the passes that look for the few triangles or vertices near a feature.
-template <class Keep>
-std::vector<std::uint32_t> select_in_parallel(std::size_t n, const Keep& keep) {
-    constexpr std::size_t kBlock = std::size_t(1) << 14;
-    std::vector<std::vector<std::uint32_t>> parts((n + kBlock - 1) / kBlock);
-    tbb::parallel_for(std::size_t(0), parts.size(), [&](std::size_t b) {
-        for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
-            if (keep(i)) parts[b].push_back(std::uint32_t(i));
-    });
-    std::size_t total = 0;
-    for (const auto& p : parts) total += p.size();
-    std::vector<std::uint32_t> out;
-    out.reserve(total);
-    for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
-    return out;
-}
-
 /// The indices in the ascending, disjoint runs [first, second) for which `keep` holds, ascending: runs in parallel,
 /// then joined (the result does not depend on the thread count).
 template <class Keep>
@@ -68,6 +50,16 @@ std::vector<std::uint32_t> select_in_runs(const std::vector<std::pair<std::uint3
     out.reserve(total);
     for (const auto& p : parts) out.insert(out.end(), p.begin(), p.end());
     return out;
+}
+
+/// The indices in [0, n) for which `keep` holds, ascending: fixed blocks in parallel (the result does not depend on
+/// the thread count), then joined. For the passes that look for the few triangles or vertices near a feature.
+template <class Keep>
+std::vector<std::uint32_t> select_in_parallel(std::size_t n, const Keep& keep) {
+    constexpr std::size_t kBlock = std::size_t(1) << 14;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> runs;
+    for (std::size_t i = 0; i < n; i += kBlock) runs.push_back({std::uint32_t(i), std::uint32_t(std::min(n, i + kBlock))});
+    return select_in_runs(runs, keep);
 }
 
 /// The cycle the sides `next` (a -> b, sorted by a, no a twice, at least one) chain into from the first a, or an
