@@ -756,7 +756,7 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                     if (k == looked.size() || looked[k] != f) continue; // not so: every fan's triangle is looked at
                     if (const Index3 cell = key_cell(looked_cell[k]); around.any(cell, cell)) fan_of_triangle[f] = p;
                 }
-            for (const Tip& tip : holed) {
+            for (Tip& tip : holed) {
                 if (std::any_of(tip.ps.begin(), tip.ps.end(), [&](std::size_t p) { return in_tip[p] != 0; })) continue;
                 const Eigen::Vector3d q = voxmap.index_of(tip.corner);
                 const Index3 c = cell_containing(q);
@@ -774,6 +774,38 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
                                 }
                         }
                 if (taken || extra.empty()) continue;
+                // What the patch still surrounds farther off (triangles whose corners are all the patch's): one no
+                // fan has joins, and a fan's patch joins whole, with its group, where no other corner has it.
+                std::vector<std::int32_t> patch_vertices;
+                for (const int m : tip.members)
+                    for (const std::uint32_t f : features[std::size_t(m)].triangles)
+                        for (const auto v : mesh.triangles[f]) patch_vertices.push_back(v);
+                for (const std::uint32_t f : extra)
+                    for (const auto v : mesh.triangles[f]) patch_vertices.push_back(v);
+                std::sort(patch_vertices.begin(), patch_vertices.end());
+                std::vector<std::size_t> surrounded;
+                for (std::int64_t dz = -3; dz <= 3; ++dz)
+                    for (std::int64_t dy = -3; dy <= 3; ++dy)
+                        for (std::int64_t dx = -3; dx <= 3; ++dx) {
+                            const Index3 cell{c[0] + dx, c[1] + dy, c[2] + dz};
+                            if (outside_cell(q, cell) <= tip.nearest + 1.5) continue; // gathered above
+                            if (const auto it = looked_in_cell.find(cell_key(cell)); it != looked_in_cell.end())
+                                for (const std::uint32_t f : it->second) {
+                                    const auto& t = mesh.triangles[f];
+                                    if (!std::all_of(t.begin(), t.end(), [&](std::int32_t v) { return std::binary_search(patch_vertices.begin(), patch_vertices.end(), v); })) continue;
+                                    if (const auto owner = fan_of_triangle.find(f); owner == fan_of_triangle.end()) extra.push_back(f);
+                                    else if (!std::binary_search(tip.ps.begin(), tip.ps.end(), owner->second))
+                                        for (const std::size_t p : *joined_list[group_of[owner->second]]) surrounded.push_back(p);
+                                }
+                        }
+                if (std::any_of(surrounded.begin(), surrounded.end(), [&](std::size_t p) { return in_tip[p] != 0; })) continue;
+                std::sort(surrounded.begin(), surrounded.end());
+                surrounded.erase(std::unique(surrounded.begin(), surrounded.end()), surrounded.end());
+                for (const std::size_t p : surrounded)
+                    if (!std::binary_search(tip.ps.begin(), tip.ps.end(), p)) tip.members.insert(tip.members.end(), patch_list[p]->begin(), patch_list[p]->end());
+                tip.ps.insert(tip.ps.end(), surrounded.begin(), surrounded.end());
+                std::sort(tip.ps.begin(), tip.ps.end());
+                tip.ps.erase(std::unique(tip.ps.begin(), tip.ps.end()), tip.ps.end());
                 Fan fan;
                 make_fan(tip.members, fan, &tip.corner, extra);
                 if (fan.cycle.empty()) continue;
