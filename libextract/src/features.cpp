@@ -261,27 +261,21 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     // they lie on a grid edge) are in these blocks too. The output is the same; at 512 the bunny ear's passes visit
     // 30 % of the vertices, and its extraction (less snapping) took 0.409 s against 0.425 (medians of 5).
     auto runs_where = [&](const auto& wanted) {
+        // Blocks one after another join into runs of some thousands, each a task.
+        auto add = [](auto& runs, std::uint32_t first, std::uint32_t end) {
+            if (!runs.empty() && runs.back().second == first && end - runs.back().first <= 4096) runs.back().second = end;
+            else runs.push_back({first, end});
+        };
         std::vector<std::pair<std::uint32_t, std::uint32_t>> vertex_runs, triangle_runs;
         for (std::size_t n = 0; n < blocks.size(); ++n) {
-            const Index3& c = blocks[n].first_cell;
-            if (!wanted(c)) continue;
+            if (!wanted(blocks[n].first_cell)) continue;
             const std::uint32_t v_end = n + 1 < blocks.size() ? blocks[n + 1].first_vertex : std::uint32_t(nv);
             const std::uint32_t t_end = n + 1 < blocks.size() ? blocks[n + 1].first_triangle : std::uint32_t(nt);
-            // Blocks one after another join into runs of some thousands, each a task.
-            auto add = [](auto& runs, std::uint32_t first, std::uint32_t end) {
-                if (!runs.empty() && runs.back().second == first && end - runs.back().first <= 4096) runs.back().second = end;
-                else runs.push_back({first, end});
-            };
             add(vertex_runs, blocks[n].first_vertex, v_end), add(triangle_runs, blocks[n].first_triangle, t_end);
         }
-        if (blocks.empty()) // not cut in blocks
-            for (std::uint32_t i = 0; i < std::max(nv, nt); i += 4096) {
-                if (i < nv) vertex_runs.push_back({i, std::uint32_t(std::min<std::size_t>(nv, i + 4096))});
-                if (i < nt) triangle_runs.push_back({i, std::uint32_t(std::min<std::size_t>(nt, i + 4096))});
-            }
         return std::pair(vertex_runs, triangle_runs);
     };
-    constexpr std::int64_t kBlockCells = 8;
+    constexpr std::int64_t kBlockCells = MarchingBlock::kCells;
     const auto [near_vertices, near_triangles] = runs_where([&](const Index3& c) {
         return !grid || grid->near({c[0] - 2, c[1] - 2, c[2] - 2}, {c[0] + kBlockCells + 1, c[1] + kBlockCells + 1, c[2] + kBlockCells + 1});
     });

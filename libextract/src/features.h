@@ -214,8 +214,9 @@ bool on_grid_edge(const SparseVoxmap& voxmap, const Eigen::Vector3d& p);
 
 /// `mesh`, marching cubes' output for `voxmap` (every vertex on a grid edge, every triangle in one cell), with
 /// the cells that hold a sharp part re-meshed as fans around their feature points and those points joined.
-/// `blocks`: where marching cubes put each block's vertices and triangles; the passes over all of them visit only
-/// the blocks near the feature surface (all of them without one), and the output is the same.
+/// `blocks`: where marching cubes put each block's vertices and triangles (marching_cubes' own list for `mesh`);
+/// the passes over all of them visit only the blocks near the feature surface (all of them without one), and the
+/// output is the same.
 TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, const ExtractOptions& options, const std::vector<MarchingBlock>& blocks);
 
 /// The feature mesher's last step (feature_edges.cpp): each mesh edge that passes under one of the input's sharp
@@ -230,7 +231,8 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
 /// After the splits: a triangle that faces against its corners' `normals` (folded in the plane of a face) has the
 /// edge it shares with a neighbour flipped, where the two new triangles face the right way; where no flip does,
 /// a corner whose triangles all lie in one plane moves to the middle of its loop, where they then all face the
-/// plane's way. The mesh stays a closed 2-manifold, its surface the same. Returns the triangles it rewrote (those
+/// plane's way, and a corner between two neighbours on one line (a sharp edge) slides along it until its triangles
+/// unfold. The mesh stays a closed 2-manifold, its surface the same. Returns the triangles it rewrote (those
 /// around a moved vertex included).
 std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles,
                                   const std::vector<Eigen::Vector3d>& normals);

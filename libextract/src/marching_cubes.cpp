@@ -83,7 +83,7 @@ const CellTable& cell_table() {
     return table;
 }
 
-constexpr int kCells = 8;                          // cells per block side
+constexpr int kCells = MarchingBlock::kCells;
 constexpr int kSide = kCells + 1;                  // corner values per block side
 constexpr int kEdgeBits = 3 * kCells * kCells * kCells; // edges a block owns: 3 from each low corner
 constexpr int kWords = kEdgeBits / 64;

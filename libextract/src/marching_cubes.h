@@ -12,19 +12,19 @@
 
 namespace voxwarp::extract_internal {
 
-/// Triangles of the isosurface `isovalue` of the voxmap's trilinear field, one vertex on each grid edge
-/// whose ends lie on opposite sides (inside = density >= isovalue; everything past dims is outside), faces
-/// counter-clockwise seen from outside. Parallel over 8^3 blocks; the output does not depend on the thread
-/// count.
-/// Where one 8^3 block of cells put its output, in the order of the blocks: its vertices and triangles are the
-/// runs from here to the next block's; its cells are first_cell + [0, 7] on each axis (every triangle lies in one
+/// Where one block of cells put its output, in the order of the blocks: its vertices and triangles are the runs
+/// from here to the next block's; its cells are first_cell + [0, kCells) on each axis (every triangle lies in one
 /// of them, every vertex on an edge of one).
 struct MarchingBlock {
+    static constexpr int kCells = 8; ///< cells per block side
     std::array<std::int64_t, 3> first_cell;
     std::uint32_t first_vertex, first_triangle;
 };
 
-/// The blocks are appended to `blocks` where given.
+/// Triangles of the isosurface `isovalue` of the voxmap's trilinear field, one vertex on each grid edge
+/// whose ends lie on opposite sides (inside = density >= isovalue; everything past dims is outside), faces
+/// counter-clockwise seen from outside. Parallel over 8^3 blocks; the output does not depend on the thread
+/// count. Where `blocks` is given, each block it meshed is appended to it.
 TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress, std::vector<MarchingBlock>* blocks = nullptr);
 
 } // namespace voxwarp::extract_internal
