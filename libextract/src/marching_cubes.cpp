@@ -105,8 +105,11 @@ struct Block {
     }
 };
 
-/// Parameter units: how near a crossing may come to either end of its grid edge.
-constexpr double kEdgeMargin = 1e-6;
+double edge_margin(const SparseVoxmap& voxmap) {
+    const Eigen::Vector3d low = voxmap.origin(), high = voxmap.world(double(voxmap.dims()[0]), double(voxmap.dims()[1]), double(voxmap.dims()[2]));
+    const double reach = std::max(low.cwiseAbs().maxCoeff(), high.cwiseAbs().maxCoeff());
+    return std::clamp(8 * std::ldexp(reach, -24) / voxmap.voxel_size(), 1e-6, 1e-2);
+}
 
 /// One block's cells: reports its crossings in bit order (`crossing(bit, point)`), each loop centre it needs
 /// (`centre(point)`, returning its reference) and its triangles (`triangle(a, b, c)`, references), counter-
@@ -114,7 +117,7 @@ constexpr double kEdgeMargin = 1e-6;
 template <class Crossing, class Centre, class Triangle>
 void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* g0, Crossing&& crossing, Centre&& centre, Triangle&& triangle) {
     const CellTable& table = cell_table();
-    const double h = voxmap.voxel_size();
+    const double h = voxmap.voxel_size(), margin = edge_margin(voxmap);
     std::array<float, kSide * kSide * kSide> value;
     for (int z = 0; z < kSide; ++z)
         for (int y = 0; y < kSide; ++y)
@@ -125,10 +128,7 @@ void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* 
         ++high[axis];
         const float a = at(low[0], low[1], low[2]), b = at(high[0], high[1], high[2]);
         Eigen::Vector3d p = voxmap.world(double(g0[0] + low[0]), double(g0[1] + low[1]), double(g0[2] + low[2]));
-        // Kept a millionth of a voxel inside the edge: a corner at the isovalue itself (where a warp leaves a face
-        // on a plane of voxels) would put the crossings of all its edges on one point, distinct vertices at one
-        // position, and triangles with none of their area.
-        p[axis] += h * std::clamp(double((isovalue - a) / (b - a)), kEdgeMargin, 1 - kEdgeMargin);
+        p[axis] += h * std::clamp(double((isovalue - a) / (b - a)), margin, 1 - margin);
         return p;
     };
     static constexpr int step[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};

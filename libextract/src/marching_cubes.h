@@ -21,6 +21,15 @@ struct MarchingBlock {
     std::uint32_t first_vertex, first_triangle;
 };
 
+/// Parameter units: how near a crossing may come to either end of its grid edge. A corner at the isovalue itself
+/// (where a warp leaves a face on a plane of voxels) would put the crossings of all its edges on one point:
+/// distinct vertices at one position, and triangles with none of their area. Kept apart by eight steps of a 32-bit
+/// float at the domain's largest coordinate (2^-24 of it), so that they stay apart in the formats that store
+/// positions as floats (PLY, STL, glTF): a millionth of a voxel, as before, merged 67 vertices of the bar bend at
+/// 128 with others in its PLY. At least a millionth of a voxel, at most a hundredth (a model far from its origin
+/// keeps less than that in floats anyway).
+double edge_margin(const SparseVoxmap& voxmap);
+
 /// Triangles of the isosurface `isovalue` of the voxmap's trilinear field, one vertex on each grid edge
 /// whose ends lie on opposite sides (inside = density >= isovalue; everything past dims is outside), faces
 /// counter-clockwise seen from outside. Parallel over 8^3 blocks; the output does not depend on the thread
