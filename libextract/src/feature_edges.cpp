@@ -18,6 +18,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <map>
 #include <cmath>
 #include <unordered_map>
 
@@ -187,11 +189,35 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
     std::vector<std::uint8_t> touched(vertices.size(), 0);
     for (const auto& s : splits) touched[std::size_t(s.a)] = touched[std::size_t(s.b)] = 1;
     EdgeHolders holders(triangles, touched, true);
+    // The fans' centres and the splits made, by cells of a hundredth of a voxel. Edges that pass a bend of a sharp
+    // edge (the end of one of its pieces) have that point nearest, and a fan's centre on the sharp edge may be
+    // there already; a split there would be a second vertex on one position, its triangles meeting the first's (the
+    // snowden scan at 128 had 600 such). The sharp edge already passes through the first.
+    const double apart = 0.01 * h;
+    auto cell_of = [&](const Eigen::Vector3d& p) {
+        const Eigen::Vector3d q = (p / apart).array().floor();
+        return std::array<std::int64_t, 3>{std::int64_t(q.x()), std::int64_t(q.y()), std::int64_t(q.z())};
+    };
+    std::map<std::array<std::int64_t, 3>, std::vector<std::int32_t>> taken;
+    for (std::size_t v = normals.size(); v < vertices.size(); ++v) taken[cell_of(vertices[v])].push_back(std::int32_t(v));
+    auto near_one = [&](const Eigen::Vector3d& p) {
+        const auto c = cell_of(p);
+        for (std::int64_t dz = -1; dz <= 1; ++dz)
+            for (std::int64_t dy = -1; dy <= 1; ++dy)
+                for (std::int64_t dx = -1; dx <= 1; ++dx)
+                    if (const auto it = taken.find({c[0] + dx, c[1] + dy, c[2] + dz}); it != taken.end())
+                        for (const std::int32_t v : it->second)
+                            if ((vertices[std::size_t(v)] - p).norm() < apart) return true;
+        return false;
+    };
     for (const auto& [a, b, point, along] : splits) {
+        if (near_one(point)) continue;
         const std::int64_t ab = holders.of(a, b), ba = holders.of(b, a);
         if (ab < 0 || ba < 0) continue;
         const auto t1 = std::uint32_t(ab), t2 = std::uint32_t(ba);
         const std::int32_t c = third(triangles[t1], a, b), d = third(triangles[t2], a, b);
+        // A third corner already on the point (a vertex of marching cubes there) would be a second vertex there.
+        if ((vertices[std::size_t(c)] - point).norm() < apart || (vertices[std::size_t(d)] - point).norm() < apart) continue;
         const Eigen::Vector3d n1 = area_normal(vertices, triangles[t1]), n2 = area_normal(vertices, triangles[t2]);
         // Seen from outside, a and b lie on either side of the sharp edge; an end on the edge's line is on neither
         // (splitting there would make triangles with three vertices on the line).
@@ -209,6 +235,7 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
             continue;
         }
         made_splits.push_back({m, a, b});
+        taken[cell_of(point)].push_back(m);
         holders.leave(t1), holders.leave(t2);
         triangles[t1] = made[0], triangles[t2] = made[2];
         triangles.push_back(made[1]), triangles.push_back(made[3]);

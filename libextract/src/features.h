@@ -222,8 +222,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
 /// The feature mesher's last step (feature_edges.cpp): each mesh edge that passes under one of the input's sharp
 /// `edges` (world units), its ends on either side, is split at the sharp edge's point nearest it; edges whose ends'
 /// `normals` (one per vertex of marching cubes' output, zero where unknown) agree within `cos_feature` lie on one
-/// face and are left. The mesh stays a closed 2-manifold. Each split is appended to `splits` as (the new vertex,
-/// the edge's ends).
+/// face and are left. No split is made within a hundredth of a voxel of another, of a vertex past `normals` (the
+/// fans' centres) or of the edge's triangles' third corners. The mesh stays a closed 2-manifold. Each split is
+/// appended to `splits` as (the new vertex, the edge's ends).
 void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vector<std::array<std::int32_t, 3>>& triangles, const std::vector<Eigen::Vector3d>& normals,
                               double cos_feature, const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>>& edges, const SparseVoxmap& voxmap,
                               std::vector<std::array<std::int32_t, 3>>& splits);

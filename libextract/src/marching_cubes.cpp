@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -105,12 +106,6 @@ struct Block {
     }
 };
 
-double edge_margin(const SparseVoxmap& voxmap) {
-    const Eigen::Vector3d low = voxmap.origin(), high = voxmap.world(double(voxmap.dims()[0]), double(voxmap.dims()[1]), double(voxmap.dims()[2]));
-    const double reach = std::max(low.cwiseAbs().maxCoeff(), high.cwiseAbs().maxCoeff());
-    return std::clamp(8 * std::ldexp(reach, -24) / voxmap.voxel_size(), 1e-6, 1e-2);
-}
-
 /// One block's cells: reports its crossings in bit order (`crossing(bit, point)`), each loop centre it needs
 /// (`centre(point)`, returning its reference) and its triangles (`triangle(a, b, c)`, references), counter-
 /// clockwise seen from outside. Run twice with the same input, it reports the same things in the same order.
@@ -192,6 +187,12 @@ void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* 
 }
 
 } // namespace
+
+double edge_margin(const SparseVoxmap& voxmap) {
+    const Eigen::Vector3d low = voxmap.origin(), high = voxmap.world(double(voxmap.dims()[0]), double(voxmap.dims()[1]), double(voxmap.dims()[2]));
+    const double reach = std::max(low.cwiseAbs().maxCoeff(), high.cwiseAbs().maxCoeff());
+    return std::clamp(8 * std::ldexp(reach, -24) / voxmap.voxel_size(), 1e-6, 1e-2);
+}
 
 TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress, std::vector<MarchingBlock>* runs) {
     const auto& dims = voxmap.dims();
