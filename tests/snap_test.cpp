@@ -577,8 +577,13 @@ TEST(FeatureMesher, NoTwoVerticesShareAPositionAndEveryVertexIsUsed) {
             for (const auto& t : out.triangles)
                 for (const auto v : t) used[std::size_t(v)] = 1;
             EXPECT_EQ(std::count(used.begin(), used.end(), 0), 0);
-            // Touching is left (a fan's centre on a model's corner or edge, to round-off); crossing is not.
-            EXPECT_EQ(crossings_deeper_than(out, 1e-4 * report.voxel_size), 0u);
+            // Touching to round-off is left (a fan's centre on a model's corner or edge: the bar's and the scan's,
+            // a few dozen pairs); crossing is not. Where the model has no such corner nothing meets at all (the
+            // crossing pass let crossings a ten-thousandth of a voxel deep through: 37 pairs on the bunny).
+            // Snapping's own pass against crossings looks at the triangles around the vertices it moved: the scan keeps
+            // a few touching a millionth of a voxel deep.
+            EXPECT_EQ(crossings_deeper_than(out, (snap ? 1e-5 : 1e-9) * report.voxel_size), 0u);
+            if (std::string(model) == "bunny.obj" || std::string(model) == "spot_triangulated.obj") EXPECT_FALSE(self_intersects(out));
         }
     }
 }

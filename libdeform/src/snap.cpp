@@ -566,7 +566,7 @@ constexpr double kPartReach = 2;
 /// those around it (snap, refinement), and how deep (voxels) two must pass through each other's planes to count as
 /// crossing (snap).
 constexpr double kSteep = 0.7071;
-constexpr double kCrossDepth = 1e-4;
+constexpr double kCrossDepth = 1e-12;
 
 /// A compressed adjacency: start[k] .. start[k + 1] index the items of key k. `each(visit)` calls visit(key, item)
 /// for every pair, the same pairs in the same order each time it is called.

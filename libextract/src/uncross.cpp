@@ -29,10 +29,10 @@ Point point(const Eigen::Vector3d& p) { return {p.x(), p.y(), p.z()}; }
 
 /// Whether triangles a and b cross: each passes through the other's plane, by more than `tiny` (world units) on
 /// either side, and they meet (exact predicates) where they share no corner, or beyond a shared corner. Sheets that
-/// touch are not crossing: the mesher puts fans' centres and splits exactly on a model's corners and edges, where
-/// sheets meet at a point or along an edge (a split on one side of an edge only), two corners are one up to
-/// round-off, and slivers lie along an edge. Triangles folded flat onto each other (an in-plane fold) are left to
-/// unfold().
+/// touch to round-off are not crossing: the mesher puts fans' centres and splits exactly on a model's corners and
+/// edges, where slivers lie along an edge. Triangles folded flat onto each other (an in-plane fold) are left to
+/// unfold(). `tiny` was a ten-thousandth of a voxel while distinct vertices could share a position (around them
+/// every pair of faces touches); it let through crossings that CGAL finds: 37 pairs on the bunny ear edit at 128.
 bool cross(const std::vector<Eigen::Vector3d>& v, const std::array<std::int32_t, 3>& a, const std::array<std::int32_t, 3>& b, double tiny) {
     auto straddles = [&](const std::array<std::int32_t, 3>& t, const std::array<std::int32_t, 3>& plane) {
         return internal::straddle_depth(v[std::size_t(t[0])], v[std::size_t(t[1])], v[std::size_t(t[2])], v[std::size_t(plane[0])], v[std::size_t(plane[1])],
@@ -270,7 +270,7 @@ std::vector<std::uint32_t> uncross(std::vector<Eigen::Vector3d>& vertices, const
                                    const std::vector<Eigen::Vector3d>& marching, const std::vector<std::array<std::int32_t, 3>>& splits,
                                    const std::vector<std::uint32_t>& unfolded, const SparseVoxmap& voxmap) {
     const std::size_t n = vertices.size(), nm = marching.size(), nt = triangles.size();
-    const double tiny = 1e-4 * voxmap.voxel_size();
+    const double tiny = 1e-12 * voxmap.voxel_size(); // deeper than round-off
     // A vertex of marching cubes that the mesher moved goes back towards its own place, a split towards the middle
     // of its edge (which undoes it), a fan's centre towards the middle of its loop: a quarter of the way the first
     // time it is on a crossing triangle, half the second, all the third. Most crossings are shallow (the 24-gon
