@@ -86,8 +86,8 @@ inline CLI::Option* add_mesher_option(CLI::App* cmd, Mesher& mesher) {
             "--mesher", [&mesher](const std::string& name) { mesher = parse_mesher(name); },
             "mc: marching cubes (smooth, fast); features: sharp edges and corners put back (Extended Marching Cubes; "
             "the input's own sharp edges kept; a deformed mesh without any comes out as with mc; about 1.1-1.4x mc's time in a "
-            "deform; vertices that would push a sheet through another go back, though a scan's thin shell can keep a few "
-            "crossings; mc's output never crosses)")
+            "deform; vertices that would push a sheet through another go back, though faces can still touch, to "
+            "round-off, where a model has sharp edges; mc's output never meets itself)")
         ->check([](const std::string& name) {
             try {
                 parse_mesher(name);

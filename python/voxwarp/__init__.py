@@ -17,7 +17,7 @@ Functions
     extract(voxmap, isovalue=0.5, adaptivity=0.0, mesher="mc", progress=None) -> (V, F)
     deform(V, F, edit, resolution=128 | voxel_size=h, mode="volume", preview=False, max_steps=8, faces=0,
            mesher="mc", sign="auto", max_memory=None, progress=None) -> (V, F, report)
-        mesher: "mc" (marching cubes, smooth) or "features" (sharp edges and corners put back, about 1.1-1.4x the time; a scan's thin shell can keep a few crossings), as --mesher;
+        mesher: "mc" (marching cubes, smooth) or "features" (sharp edges and corners put back, about 1.1-1.4x the time; faces can touch, to round-off, where a model has sharp edges), as --mesher;
         sign: "auto", "flood-fill" or "winding-number", as --sign (the report's "sign" and "sign_note" say which ran);
         edit: a dict in the edit-file schema (README.md, "Edit files") or a path to an edit file;
         report: the dict `voxwarp deform --report` writes (residuals, surface misses, volumes, timings).
