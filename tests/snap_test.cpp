@@ -511,6 +511,15 @@ SnappedAndPlain deform_both_ways(const std::string& mesh, const std::string& edi
     return r;
 }
 
+/// A bundled edit of a bundled model at 128 with the feature mesher, snapped or not.
+TriangleMesh deform_with_features(const char* model, const char* edit, bool snap, DeformReport& report) {
+    DeformOptions options;
+    options.voxelize.resolution = 128;
+    options.extract.mesher = Mesher::features;
+    options.snap = snap;
+    return deform_mesh(read_mesh(test::data_path(model)), read_edit_file(test::data_path(edit)), options, report);
+}
+
 TEST(FeatureMesher, NoSheetCrossesAnotherOnTheBundledEdits) {
     // The feature mesher moves crossings onto the input's surface, fans cells to where their tangent planes meet and
     // splits edges on sharp edges; each pushed sheets through their neighbours where a model is thin or a feature
@@ -518,12 +527,8 @@ TEST(FeatureMesher, NoSheetCrossesAnotherOnTheBundledEdits) {
     // bunny ear 118, bar bend 58, box twist 17 (at 128, without snapping, which has checks of its own); now none.
     for (const auto& [model, edit] : {std::pair{"bunny.obj", "bunny_ear.json"}, {"bar.obj", "bar_bend.json"}, {"box.obj", "box_twist.json"}}) {
         SCOPED_TRACE(edit);
-        DeformOptions options;
-        options.voxelize.resolution = 128;
-        options.extract.mesher = Mesher::features;
-        options.snap = false;
         DeformReport report;
-        const TriangleMesh out = deform_mesh(read_mesh(test::data_path(model)), read_edit_file(test::data_path(edit)), options, report);
+        const TriangleMesh out = deform_with_features(model, edit, false, report);
         EXPECT_EQ(crossings_deeper_than(out, 1e-3 * report.voxel_size), 0u);
         EXPECT_TRUE(topology(out).watertight());
     }
@@ -539,11 +544,8 @@ TEST(FeatureMesher, SnappedOutputCrossesNowhere) {
     // put back on the bunny and the scan.
     for (const auto& [model, edit] : {std::pair{"bunny.obj", "bunny_ear.json"}, {"bar.obj", "bar_bend.json"}, {"box.obj", "box_twist.json"}, {"snowden_lo.obj", "snowden_nose.json"}}) {
         SCOPED_TRACE(edit);
-        DeformOptions options;
-        options.voxelize.resolution = 128;
-        options.extract.mesher = Mesher::features;
         DeformReport report;
-        const TriangleMesh out = deform_mesh(read_mesh(test::data_path(model)), read_edit_file(test::data_path(edit)), options, report);
+        const TriangleMesh out = deform_with_features(model, edit, true, report);
         const std::size_t deep = crossings_deeper_than(out, 1e-3 * report.voxel_size);
         std::printf("%s at 128, features, snapped: %zu pairs crossing deeper than 1e-3 voxel, %zu of %zu vertices put back\n", edit, deep, report.put_back_vertices,
                     out.vertices.size());
@@ -564,12 +566,8 @@ TEST(FeatureMesher, NoTwoVerticesShareAPositionAndEveryVertexIsUsed) {
     for (const auto& [model, edit] : {std::pair{"snowden_lo.obj", "snowden_nose.json"}, {"bunny.obj", "bunny_ear.json"}, {"bar.obj", "bar_bend.json"}, {"spot_triangulated.obj", "spot_head.json"}}) {
         for (const bool snap : {false, true}) {
             SCOPED_TRACE(std::string(edit) + (snap ? ", snapped" : ", unsnapped"));
-            DeformOptions options;
-            options.voxelize.resolution = 128;
-            options.extract.mesher = Mesher::features;
-            options.snap = snap;
             DeformReport report;
-            const TriangleMesh out = deform_mesh(read_mesh(test::data_path(model)), read_edit_file(test::data_path(edit)), options, report);
+            const TriangleMesh out = deform_with_features(model, edit, snap, report);
             std::set<std::array<double, 3>> positions;
             for (const auto& p : out.vertices) positions.insert({p.x(), p.y(), p.z()});
             EXPECT_EQ(positions.size(), out.vertices.size());
