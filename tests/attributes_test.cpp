@@ -702,5 +702,41 @@ TEST(Attributes, SpotWithItsHeadTurnedKeepsItsTexture) {
     expect_texture_kept("Spot's head turned at 128", out, Reference(exact), texture, report); // measured 0.019 / 0.58, 1.7, 29 of 95166
 }
 
+TEST(Attributes, SeamVerticesStayApartFromTheirNeighboursInFloats) {
+    // A UV seam through an output vertex (the feature mesher puts fans' centres on sharp edges, which seams follow)
+    // put the vertex cut there on that vertex, one position once written as 32-bit floats: Spot's head turn at 128
+    // with the feature mesher had 33 such edges (unsnapped), two triangles without area each. The seam's vertices
+    // come after all others: those of the same deform without attributes.
+    const TriangleMesh spot = read_mesh(test::data_path("spot_triangulated.obj"));
+    TriangleMesh plain;
+    plain.vertices = spot.vertices, plain.triangles = spot.triangles;
+    const EditScript script = read_edit_file(test::data_path("spot_head.json"));
+    DeformOptions options;
+    options.voxelize.resolution = 128;
+    options.extract.mesher = Mesher::features;
+    options.snap = false;
+    DeformReport report, plain_report;
+    const TriangleMesh out = deform_mesh(spot, script, options, report), shape = deform_mesh(plain, script, options, plain_report);
+    ASSERT_GT(out.vertices.size(), shape.vertices.size());
+    for (std::size_t v = 0; v < shape.vertices.size(); ++v) ASSERT_EQ(out.vertices[v], shape.vertices[v]) << v;
+    auto in_floats = [&](std::int32_t v) {
+        const Eigen::Vector3d& p = out.vertices[std::size_t(v)];
+        return std::array<float, 3>{float(p.x()), float(p.y()), float(p.z())};
+    };
+    std::size_t merged = 0, seam_edges = 0;
+    for (const auto& t : out.triangles)
+        for (std::size_t c = 0; c < 3; ++c) {
+            const std::int32_t a = t[c], b = t[(c + 1) % 3];
+            // A seam vertex and one of the rest: the ends of the edge it was cut on are among these. (Two seam
+            // vertices on edges beside each other can still meet where the triangle between is a sliver: 3 pairs,
+            // 3e-9 to 1.3e-6 voxel apart.)
+            if ((std::size_t(a) < shape.vertices.size()) == (std::size_t(b) < shape.vertices.size())) continue;
+            ++seam_edges;
+            merged += in_floats(a) == in_floats(b);
+        }
+    EXPECT_GT(seam_edges, 1000u);
+    EXPECT_EQ(merged, 0u);
+}
+
 } // namespace
 } // namespace voxwarp

@@ -231,6 +231,14 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
             }
         }
     });
+    // A seam through an end of the edge (an output vertex on the input's seam: a fan's centre on a sharp edge the
+    // seam follows) would put the new vertex on that end: kept eight 32-bit float steps away at the output's largest
+    // coordinate, as marching cubes keeps its crossings off a grid edge's ends, so that the two stay apart in PLY,
+    // STL and glTF (Spot's head at 128 with the feature mesher had 34 pairs one position there).
+    double largest = 0;
+    if (!crossing_edges.empty())
+        for (const auto& p : output.vertices) largest = std::max(largest, p.cwiseAbs().maxCoeff());
+    const double apart = 8 * std::ldexp(largest, -24);
     const auto first_seam_vertex = std::int32_t(output.vertices.size());
     output.vertices.reserve(output.vertices.size() + crossing_edges.size());
     source.reserve(source.size() + crossing_edges.size());
@@ -238,7 +246,9 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     for (std::size_t i = 0; i < crossing_edges.size(); ++i) {
         const auto a = std::size_t(crossing_edges[i] >> 32), b = std::size_t(crossing_edges[i] & 0xffffffffu);
         const Crossing& x = crossings[i];
-        output.vertices.push_back((1 - x.t) * output.vertices[a] + x.t * output.vertices[b]);
+        const double keep = std::min(0.25, apart / ((output.vertices[b] - output.vertices[a]).norm() + 1e-300));
+        const double t = std::clamp(x.t, keep, 1 - keep);
+        output.vertices.push_back((1 - t) * output.vertices[a] + t * output.vertices[b]);
         source.push_back(in_face(x.q, x.low_face));
         sides.push_back({in_face(x.q, x.low_face)});
         add_side(sides.back(), in_face(x.q, x.high_face));
