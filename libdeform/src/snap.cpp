@@ -564,7 +564,8 @@ constexpr double kSheetMargin = 0.05;
 constexpr double kPartReach = 2;
 /// The cosine of the angle from a corner's extracted normal past which a snapped triangle is tested for crossing
 /// those around it (snap, refinement), and how deep (voxels) two must pass through each other's planes to count as
-/// crossing (snap).
+/// crossing (snap): deeper than round-off. A ten-thousandth of a voxel let the feature mesher's snapped output keep
+/// crossings CGAL finds (the snowden scan at 128: 74 pairs deeper than 1e-9 voxel, the deepest 4.8e-5; now 1.2e-6).
 constexpr double kSteep = 0.7071;
 constexpr double kCrossDepth = 1e-12;
 

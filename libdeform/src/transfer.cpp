@@ -234,7 +234,7 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     // A seam through an end of the edge (an output vertex on the input's seam: a fan's centre on a sharp edge the
     // seam follows) would put the new vertex on that end: kept eight 32-bit float steps away at the output's largest
     // coordinate, as marching cubes keeps its crossings off a grid edge's ends, so that the two stay apart in PLY,
-    // STL and glTF (Spot's head at 128 with the feature mesher had 34 pairs one position there).
+    // STL and glTF (Spot's head turn at 128 with the feature mesher had 33 such edges).
     double largest = 0;
     if (!crossing_edges.empty())
         for (const auto& p : output.vertices) largest = std::max(largest, p.cwiseAbs().maxCoeff());

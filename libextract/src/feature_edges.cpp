@@ -19,8 +19,8 @@
 
 #include <algorithm>
 #include <array>
-#include <map>
 #include <cmath>
+#include <map>
 #include <unordered_map>
 
 namespace voxwarp::extract_internal {

@@ -18,10 +18,8 @@
 #include <cmath>
 #include <map>
 #include <memory>
-#include <iterator>
 #include <limits>
 #include <set>
-#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -488,7 +486,8 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             if (along != edge_in_cell.end() && !along->second.empty() && !(l.rank == 3 && worst < cos_feature))
                 l.point = along->second.point(), l.rank = 2;
             if (l.rank >= 2) features.push_back(std::move(l));
-        }    });
+        }
+    });
     std::vector<Loop> features;
     for (auto& loops : cell_loops)
         for (auto& l : loops) features.push_back(std::move(l));
