@@ -218,7 +218,13 @@
     const started = performance.now();
     return Viewer.api('/api/deform?resolution=' + resolution, { method: 'POST', body: body, headers: { 'Content-Type': 'application/json' } })
       .then(async function (response) {
-        if (response.status === 409) return true; // superseded: a newer request is on its way
+        if (response.status === 409) {
+          // Superseded: a newer request is on its way. Unless this is the newest the page sent: the server cancels
+          // by arrival, so an older request that overtook it on its way (each goes on a connection of its own) is
+          // answered instead, and that answer is dropped below as superseded. Sent again, it is shown.
+          if (full && id === issued) return requestDeform(fullResolution);
+          return true;
+        }
         if (!response.ok) {
           const e = await response.json().catch(() => ({ error: response.statusText }));
           showError(e.error);
