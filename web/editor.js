@@ -206,7 +206,7 @@
   // ---- Deform requests: at most one preview in flight, the newest state wins; a full-resolution request goes out
   // at once (the server cancels the preview it supersedes) and no queued preview is sent after it.
   let inFlight = false, pending = 0, issued = 0, lastFull = 0;
-  function requestDeform(resolution) {
+  function requestDeform(resolution, again = false) {
     if (!script().edits.length) { resultMesh.geometry = model; dress(resultMesh); showSource(); refreshLattice(); return Promise.resolve(true); }
     const full = resolution === fullResolution;
     if (full) { lastFull = ++issued; pending = 0; }
@@ -221,8 +221,9 @@
         if (response.status === 409) {
           // Superseded: a newer request is on its way. Unless this is the newest the page sent: the server cancels
           // by arrival, so an older request that overtook it on its way (each goes on a connection of its own) is
-          // answered instead, and that answer is dropped below as superseded. Sent again, it is shown.
-          if (full && id === issued) return requestDeform(fullResolution);
+          // answered instead, and that answer is dropped below as superseded. Sent again, it is shown; once only,
+          // so that two pages on one server cannot cancel each other's requests for ever.
+          if (full && id === issued && !again) return requestDeform(fullResolution, true);
           return true;
         }
         if (!response.ok) {
