@@ -238,7 +238,7 @@ TransferReport transfer_attributes(TriangleMesh& output, const SourceSurface& su
     double largest = 0;
     if (!crossing_edges.empty())
         for (const auto& p : output.vertices) largest = std::max(largest, p.cwiseAbs().maxCoeff());
-    const double apart = 8 * std::ldexp(largest, -24);
+    const double apart = internal::float_gap(largest);
     const auto first_seam_vertex = std::int32_t(output.vertices.size());
     output.vertices.reserve(output.vertices.size() + crossing_edges.size());
     source.reserve(source.size() + crossing_edges.size());

@@ -236,6 +236,17 @@ private:
     std::vector<Stretch> stretches_;
 };
 
+/// Each pair (a, b), a < b, of the items of `by_x` (x, item) whose x lie within `apart` of each other: `by_x` is
+/// sorted, then the pairs go to `f` by the place of their lower x, then the higher. The points themselves are
+/// compared by the caller.
+template <class F>
+void pairs_near_in_x(std::vector<std::pair<double, std::uint32_t>>& by_x, double apart, F&& f) {
+    tbb::parallel_sort(by_x.begin(), by_x.end());
+    for (std::size_t i = 0; i < by_x.size(); ++i)
+        for (std::size_t j = i + 1; j < by_x.size() && by_x[j].first - by_x[i].first < apart; ++j)
+            f(std::min(by_x[i].second, by_x[j].second), std::max(by_x[i].second, by_x[j].second));
+}
+
 } // namespace
 
 bool on_grid_edge(const SparseVoxmap& voxmap, const Eigen::Vector3d& p) { return edge_of(voxmap, p).axis >= 0; }
@@ -341,15 +352,12 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         const double apart = 1e-3 * h;
         std::vector<std::pair<double, std::uint32_t>> by_x(made_at.size());
         for (std::size_t k = 0; k < made_at.size(); ++k) by_x[k] = {mesh.vertices[made_at[k].first].x(), made_at[k].first};
-        tbb::parallel_sort(by_x.begin(), by_x.end());
         std::vector<std::uint32_t> back; // projected ones near another moved one that stays
-        for (std::size_t i = 0; i < by_x.size(); ++i)
-            for (std::size_t j = i + 1; j < by_x.size() && by_x[j].first - by_x[i].first < apart; ++j) {
-                // Of the two, one moved along its own grid edge stays (such never share a point), else the first.
-                std::uint32_t a = std::min(by_x[i].second, by_x[j].second), b = std::max(by_x[i].second, by_x[j].second);
-                if (!(flags[b] & kProjected)) std::swap(a, b);
-                if ((flags[b] & kProjected) && (mesh.vertices[a] - mesh.vertices[b]).norm() < apart) back.push_back(b);
-            }
+        pairs_near_in_x(by_x, apart, [&](std::uint32_t a, std::uint32_t b) {
+            // Of the two, one moved along its own grid edge stays (such never share a point), else the first.
+            if (!(flags[b] & kProjected)) std::swap(a, b);
+            if ((flags[b] & kProjected) && (mesh.vertices[a] - mesh.vertices[b]).norm() < apart) back.push_back(b);
+        });
         std::sort(back.begin(), back.end());
         back.erase(std::unique(back.begin(), back.end()), back.end());
         for (const std::uint32_t v : back) {
@@ -916,7 +924,6 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
         std::vector<std::pair<double, std::uint32_t>> by_x;
         for (std::size_t i = 0; i < fans.size(); ++i)
             if (!fans[i].cycle.empty()) by_x.push_back({fans[i].point.x(), std::uint32_t(i)});
-        std::sort(by_x.begin(), by_x.end());
         const double apart = 0.01 * h;
         // Only fans that face apart: fans on one point that face one way are a sharp edge's run of cells reaching
         // a corner, or the edges around a tip (rejecting those as well lost the polyhedra 7 triangles to folds and a
@@ -927,11 +934,9 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
             for (const auto v : fan.cycle) n += region_normals[std::size_t(v)];
             return n;
         };
-        for (std::size_t i = 0; i < by_x.size(); ++i)
-            for (std::size_t j = i + 1; j < by_x.size() && by_x[j].first - by_x[i].first < apart; ++j) {
-                const std::uint32_t a = std::min(by_x[i].second, by_x[j].second), b = std::max(by_x[i].second, by_x[j].second);
-                if (!rejected[a] && (fans[a].point - fans[b].point).norm() < apart && facing(fans[a]).dot(facing(fans[b])) < 0) rejected[b] = 1;
-            }
+        pairs_near_in_x(by_x, apart, [&](std::uint32_t a, std::uint32_t b) {
+            if (!rejected[a] && (fans[a].point - fans[b].point).norm() < apart && facing(fans[a]).dot(facing(fans[b])) < 0) rejected[b] = 1;
+        });
     }
     struct Built {
         TriangleMesh mesh;

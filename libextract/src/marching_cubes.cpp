@@ -8,6 +8,8 @@
 // vertex, which lands between the two faces of a wall about a voxel thick.
 #include "marching_cubes.h"
 
+#include <voxwarp_internal/geometry.h>
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -108,11 +110,12 @@ struct Block {
 
 /// One block's cells: reports its crossings in bit order (`crossing(bit, point)`), each loop centre it needs
 /// (`centre(point)`, returning its reference) and its triangles (`triangle(a, b, c)`, references), counter-
-/// clockwise seen from outside. Run twice with the same input, it reports the same things in the same order.
+/// clockwise seen from outside, each crossing `margin` (edge_margin) off its grid edge's ends. Run twice with the same
+/// input, it reports the same things in the same order.
 template <class Crossing, class Centre, class Triangle>
-void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* g0, Crossing&& crossing, Centre&& centre, Triangle&& triangle) {
+void mesh_block(const SparseVoxmap& voxmap, float isovalue, double margin, const std::int64_t* g0, Crossing&& crossing, Centre&& centre, Triangle&& triangle) {
     const CellTable& table = cell_table();
-    const double h = voxmap.voxel_size(), margin = edge_margin(voxmap);
+    const double h = voxmap.voxel_size();
     std::array<float, kSide * kSide * kSide> value;
     for (int z = 0; z < kSide; ++z)
         for (int y = 0; y < kSide; ++y)
@@ -191,11 +194,12 @@ void mesh_block(const SparseVoxmap& voxmap, float isovalue, const std::int64_t* 
 double edge_margin(const SparseVoxmap& voxmap) {
     const Eigen::Vector3d low = voxmap.origin(), high = voxmap.world(double(voxmap.dims()[0]), double(voxmap.dims()[1]), double(voxmap.dims()[2]));
     const double reach = std::max(low.cwiseAbs().maxCoeff(), high.cwiseAbs().maxCoeff());
-    return std::clamp(8 * std::ldexp(reach, -24) / voxmap.voxel_size(), 1e-6, 1e-2);
+    return std::clamp(internal::float_gap(reach) / voxmap.voxel_size(), 1e-6, 1e-2);
 }
 
 TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress& progress, std::vector<MarchingBlock>* runs) {
     const auto& dims = voxmap.dims();
+    const double margin = edge_margin(voxmap);
     const std::array<std::int64_t, 3> count{(dims[0] + 1 + kCells - 1) / kCells, (dims[1] + 1 + kCells - 1) / kCells,
                                             (dims[2] + 1 + kCells - 1) / kCells};
     const std::int64_t total = count[0] * count[1] * count[2];
@@ -234,7 +238,7 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
             Block& block = blocks[n];
             const auto g0 = first_corner(n);
             mesh_block(
-                voxmap, isovalue, g0.data(), [&](std::uint32_t bit, const Eigen::Vector3d&) { block.crossing[bit >> 6] |= std::uint64_t(1) << (bit & 63); },
+                voxmap, isovalue, margin, g0.data(), [&](std::uint32_t bit, const Eigen::Vector3d&) { block.crossing[bit >> 6] |= std::uint64_t(1) << (bit & 63); },
                 [&](const Eigen::Vector3d&) { return kCentre | block.centres++; }, [&](std::uint32_t, std::uint32_t, std::uint32_t) { ++block.triangles; });
             for (int w = 0; w < kWords; ++w) {
                 block.before[std::size_t(w)] = block.edges;
@@ -281,7 +285,7 @@ TriangleMesh marching_cubes(const SparseVoxmap& voxmap, float isovalue, Progress
             std::uint64_t next_crossing = block.first_vertex, next_centre = block.first_vertex + block.edges, next_triangle = block.first_triangle;
             const auto g0 = first_corner(n);
             mesh_block(
-                voxmap, isovalue, g0.data(), [&](std::uint32_t, const Eigen::Vector3d& p) { mesh.vertices[std::size_t(next_crossing++)] = p; },
+                voxmap, isovalue, margin, g0.data(), [&](std::uint32_t, const Eigen::Vector3d& p) { mesh.vertices[std::size_t(next_crossing++)] = p; },
                 [&](const Eigen::Vector3d& p) {
                     mesh.vertices[std::size_t(next_centre)] = p;
                     return kCentre | std::uint32_t(next_centre++ - block.first_vertex - block.edges);

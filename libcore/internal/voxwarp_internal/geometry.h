@@ -13,6 +13,10 @@
 
 namespace voxwarp::internal {
 
+/// World units two points must keep apart to stay apart, and not turn about each other, once written as 32-bit floats
+/// (PLY, STL, glTF) anywhere up to `largest` from the origin: eight float steps there (a float keeps 24 bits).
+inline double float_gap(double largest) { return 8 * std::ldexp(largest, -24); }
+
 /// The point of triangle abc nearest p, by the Voronoi region of p's projection (Ericson, Real-Time Collision
 /// Detection 5.1.5). Also the tests' measure of which input faces lie near an output triangle.
 inline Eigen::Vector3d closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
