@@ -31,6 +31,7 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <numbers>
 #include <optional>
 #include <unordered_map>
 
@@ -590,6 +591,21 @@ struct Adjacency {
 bool turns_from_corners(const Eigen::Vector3d& before, const Eigen::Vector3d& after, const std::array<std::int32_t, 3>& t,
                         const std::vector<Eigen::Vector3d>& normal) {
     return std::any_of(t.begin(), t.end(), [&](std::int32_t i) { return after.dot(normal[std::size_t(i)]) <= 0 && before.dot(normal[std::size_t(i)]) > 0; });
+}
+
+/// Whether a face with normal `n` (unnormalized) at a point of a crease, whose faces' exact normals are `e` (unit),
+/// turns from either of them by more than the crease turns (its normals' angle) and a margin: a face on the crease
+/// faces between them. The margin is 45 degrees, or half what the crease leaves to a half turn where that is less,
+/// so that even a knife edge rejects a face turned fully away from one side. A piece lying flat on one face but
+/// facing away from it (an in-plane fold) can still look along the other face's normal where the crease is sharper
+/// than a right angle (the bar bend's ends, whose walls the map leans 30-50 degrees over the bottom face).
+bool off_crease(const Eigen::Vector3d& n, const std::array<Eigen::Vector3d, 2>& e) {
+    const double turn = std::atan2(e[0].cross(e[1]).norm(), e[0].dot(e[1]));
+    if (!(turn > 1e-6)) return false; // one face: judged as any other face is
+    constexpr double kPi = std::numbers::pi;
+    const double bound = std::cos(std::max(0.5 * kPi, turn + std::min(0.25 * kPi, 0.5 * (kPi - turn))));
+    const double length = n.norm();
+    return n.dot(e[0]) < bound * length || n.dot(e[1]) < bound * length;
 }
 
 /// Whether a face with normal `n` (unnormalized) turns further than kSteep from the extracted normal at one of its
@@ -1739,6 +1755,12 @@ TriangleBox box_of(const std::vector<Eigen::Vector3d>& P, const std::array<std::
     return {p.cwiseMin(q).cwiseMin(r), p.cwiseMax(q).cwiseMax(r)};
 }
 bool boxes_meet(const TriangleBox& x, const TriangleBox& y) { return (x.first.array() <= y.second.array()).all() && (y.first.array() <= x.second.array()).all(); }
+/// Whether t runs along its side x -> y.
+bool has_side(const std::array<std::int32_t, 3>& t, std::int32_t x, std::int32_t y) {
+    for (std::size_t k = 0; k < 3; ++k)
+        if (t[k] == x && t[(k + 1) % 3] == y) return true;
+    return false;
+}
 /// The normal of triangle t with corners in X, unnormalized (twice its area long).
 Eigen::Vector3d triangle_normal(const std::vector<Eigen::Vector3d>& X, const std::array<std::int32_t, 3>& t) {
     return (X[std::size_t(t[1])] - X[std::size_t(t[0])]).cross(X[std::size_t(t[2])] - X[std::size_t(t[0])]);
@@ -2365,6 +2387,18 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
             bool along = false;
             for (const std::int32_t c : T[*f]) along |= n.dot(exact_normal(c)) > 0;
             fine = fine && along;
+            // Nor folded flat onto a neighbour (its third corner within a thousandth of a voxel of the neighbour's
+            // plane, the two facing apart): such a face can still look along the exact normal of a corner on a sharp
+            // crease (the bar bend's ends). A thin part's ridge, as sharp but open, stays.
+            for (int k = 0; k < 3 && fine; ++k) {
+                const std::int32_t a = T[*f][std::size_t(k)], b = T[*f][std::size_t((k + 1) % 3)], c = T[*f][std::size_t((k + 2) % 3)];
+                const auto [ab, ae] = index.ring(std::size_t(a));
+                for (const std::uint32_t* g = ab; g != ae && fine; ++g) {
+                    if (*g == *f || !has_side(T[*g], b, a)) continue;
+                    const Eigen::Vector3d m = normal_of(T[*g]).normalized();
+                    fine = n.normalized().dot(m) > -kCornerFold || std::abs(m.dot(P[std::size_t(c)] - P[std::size_t(a)])) > 1e-3 * h;
+                }
+            }
             const Box b = box_of(T[*f]);
             reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
         }
@@ -2514,7 +2548,8 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
             return std::any_of(cut[c].second.begin(), cut[c].second.end(), [&](std::int32_t i) { return on(i) && splits[std::size_t(i)].rim; });
         };
         // Whether cut triangle c's pieces fold: turned over against it (or the extracted normal at its corners), or
-        // a split corner's piece against its exact normal on both sides of its crease. A rim's pieces stand on the
+        // a split corner's piece against its exact normal on both sides of its crease, or turned from either side
+        // further than the crease turns (off_crease). A rim's pieces stand on the
         // crease's two faces, which may turn from the rounded triangle they replace by more than a right angle (the
         // ear's ridge: 90-100 degrees): up to 120 degrees, the exact normals judging them.
         auto folds_in = [&](std::size_t c, const std::vector<std::array<Corner, 3>>& parts) {
@@ -2529,7 +2564,7 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
                 for (auto k : p) { // and a split corner's exact normal, on one side of its crease at least
                     if (k >= 0) continue;
                     const auto& e = splits[std::size_t(-k - 1)].normal;
-                    if (after.dot(e[0]) <= 0 && after.dot(e[1]) <= 0) return true;
+                    if ((after.dot(e[0]) <= 0 && after.dot(e[1]) <= 0) || off_crease(after, e)) return true;
                 }
                 return false;
             });
