@@ -63,6 +63,21 @@ static void BM_IncrementalControlPoint(benchmark::State& state) {
 }
 BENCHMARK(BM_IncrementalControlPoint)->Arg(256)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Two control points moved in turn: each move is the first of its point's drag (its last splat taken out, the
+// rest kept for the next), the cost a one-off move of any point pays.
+static void BM_IncrementalTwoPoints(benchmark::State& state) {
+    const WarpCase& c = warp_case(int(state.range(0)), 0.0, 3.0);
+    Warp progressive(c.domain, c.deformed);
+    const Eigen::Vector3d rest[2] = {progressive.lattice().point(4, 4, 4), progressive.lattice().point(3, 4, 4)};
+    const double h = c.domain.target_voxel_size;
+    int flip = 0;
+    for (auto _ : state) {
+        const int which = flip & 1;
+        progressive.move_control_point(4 - which, 4, 4, rest[which] + (((flip++ >> 1) & 1) ? 2.0 : -2.0) * h * Eigen::Vector3d(1, 0.5, 0));
+    }
+}
+BENCHMARK(BM_IncrementalTwoPoints)->Arg(256)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 static void BM_WarpNaive(benchmark::State& state) {
     const int n = int(state.range(0));
     const WarpCase& c = n == 60 ? warp_case(30, 0.5, 2.0) : warp_case(n, 0.0, 3.0);

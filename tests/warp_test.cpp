@@ -237,6 +237,29 @@ TEST(Warp, IncrementalEqualsFullRecompute) {
     EXPECT_EQ(max_difference(incremental, full), 0.0);
 }
 
+TEST(Warp, DraggingOnePointEqualsFullRecompute) {
+    // A drag: one control point moved again and again. From its second move on, each puts back the other regions'
+    // sums kept then and splats the point's regions once; a move beyond the kept reach keeps them afresh, a move of
+    // another point forgets them. Each step against the full warp, bit for bit.
+    const Voxmap input = sphere_voxmap(48);
+    const WarpDomain domain = make_domain(input, {.size = {9, 9, 9}});
+    Warp progressive(domain, domain.lattice);
+    const double h = input.voxel_size;
+    // b's regions lie beside a's (none shared: x spans 3-5 and 0-2 of 6), their splats inside the reach a's drag
+    // keeps.
+    const std::array<int, 3> a{6, 4, 4}, b{2, 4, 4};
+    const std::vector<std::pair<std::array<int, 3>, Eigen::Vector3d>> moves{
+        {a, {h, h, 0}}, {a, {9 * h, 0, 0}}, {a, {-6 * h, h, h}}, {a, {-2 * h, -h, 0}}, // a drag, within the reach
+        {b, {h, h, h}}, {a, {-2 * h, 0, h}}, {a, {h, -h, 0}},    {b, {-h, 2 * h, 0}},  // another point between
+        {a, {25 * h, 0, 0}}, {a, {-24 * h, h, 0}}, {a, {h, h, 0}},                     // beyond the reach, and back
+    };
+    for (std::size_t step = 0; step < moves.size(); ++step) {
+        const auto& [at, by] = moves[step];
+        progressive.move_control_point(at[0], at[1], at[2], progressive.lattice().point(at[0], at[1], at[2]) + by);
+        ASSERT_EQ(max_difference(to_dense(progressive.target()), to_dense(warp(domain, progressive.lattice()))), 0.0) << "step " << step;
+    }
+}
+
 TEST(Warp, SameResultForAnyThreadCount) {
     const Voxmap input = sphere_voxmap();
     const WarpDomain domain = make_domain(input, {});

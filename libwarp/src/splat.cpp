@@ -119,6 +119,9 @@ public:
         return table_[std::size_t(bx + blocks[0] * (by + blocks[1] * bz))].load(std::memory_order_acquire);
     }
     static std::int64_t offset(std::int64_t x, std::int64_t y, std::int64_t z) { return (x & 7) + kSide * ((y & 7) + kSide * (z & 7)); }
+    /// Block (bx, by, bz)'s place in the block table, and the block there (null where no splat reached).
+    std::size_t slot(std::int64_t bx, std::int64_t by, std::int64_t bz) const { return std::size_t(bx + blocks[0] * (by + blocks[1] * bz)); }
+    Cell* at_slot(std::size_t slot) const { return table_[slot].load(std::memory_order_acquire); }
 
 private:
     static constexpr std::size_t kChunkBlocks = 512; // 2 MiB: one huge page
@@ -664,6 +667,62 @@ struct Warp::State {
     std::vector<RegionCarry> carried; // per region, what its carried voxels carry (resolve.h)
     std::vector<Carry> carry_index;   // all the cells carried, sorted by carry_less
     std::vector<std::pair<Index3, float>> unbridged; // the bridges (resolve.h) put outside, and what the resolve gave them
+    /// The accumulator without one control point's regions, where they can reach while that point is dragged: the
+    /// other regions' sums over the blocks meeting its regions' boxes grown by kDragMargin voxels, kept on the
+    /// point's second move in a row. While the same point moves on within that reach, a move puts these blocks
+    /// back and splats its regions once, instead of taking their last splat out first (as much work again). The
+    /// sums are fixed-point, so either way gives the same bits.
+    struct Drag {
+        std::array<int, 3> point{-1, -1, -1}; // the point moved last
+        Box reach;                      // target index space; empty: no base kept
+        bool refused = false;           // too large to keep: the point's moves go on as first moves
+        std::vector<std::size_t> slots; // the blocks in reach that hold sums, in table order
+        std::vector<Cell> cells;        // their sums, a block after another
+    } drag;
+    static constexpr std::int64_t kDragMargin = 12;
+
+    /// Calls visit(slot) for each accumulator block meeting `box` (target index space), in table order.
+    template <class Visit>
+    void each_slot(const Box& box, const Visit& visit) const {
+        std::array<std::int64_t, 3> lo{}, hi{};
+        for (std::size_t a = 0; a < 3; ++a) {
+            lo[a] = std::clamp<std::int64_t>((box.lo[a] - acc.box.lo[a]) >> 3, 0, acc.blocks[a] - 1);
+            hi[a] = std::clamp<std::int64_t>((box.hi[a] - acc.box.lo[a]) >> 3, 0, acc.blocks[a] - 1);
+        }
+        for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+            for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+                for (std::int64_t x = lo[0]; x <= hi[0]; ++x) visit(acc.slot(x, y, z));
+    }
+    /// Keeps the accumulator over `reach` as point's drag base (none where that would take more than an eighth of
+    /// the memory the warp may use).
+    void keep_drag(const std::array<int, 3>& point, const Box& reach) {
+        drag = Drag{};
+        drag.point = point;
+        std::size_t held = 0;
+        each_slot(reach, [&](std::size_t slot) { held += acc.at_slot(slot) != nullptr; });
+        if (held * std::size_t(BlockAccumulator::kCells) * sizeof(Cell) > memory_limit / 8) {
+            drag.refused = true;
+            return;
+        }
+        drag.slots.reserve(held);
+        drag.cells.resize(held * std::size_t(BlockAccumulator::kCells));
+        each_slot(reach, [&](std::size_t slot) {
+            if (const Cell* cells = acc.at_slot(slot)) {
+                std::copy_n(cells, BlockAccumulator::kCells, &drag.cells[drag.slots.size() * std::size_t(BlockAccumulator::kCells)]);
+                drag.slots.push_back(slot);
+            }
+        });
+        drag.reach = reach;
+    }
+    /// Puts the drag base back: its blocks as kept, every other block in its reach empty.
+    void restore_drag() {
+        std::size_t next = 0;
+        each_slot(drag.reach, [&](std::size_t slot) {
+            Cell* cells = acc.at_slot(slot);
+            if (next < drag.slots.size() && drag.slots[next] == slot) std::copy_n(&drag.cells[next++ * std::size_t(BlockAccumulator::kCells)], BlockAccumulator::kCells, cells);
+            else if (cells) std::fill_n(cells, BlockAccumulator::kCells, Cell{0, 0});
+        });
+    }
 
     void gather_carried() {
         std::vector<CarryImage> images;
@@ -848,6 +907,7 @@ struct Warp::State {
                        "warp target of " + std::to_string(bound.hi[0] - bound.lo[0] + 1) + "x" + std::to_string(bound.hi[1] - bound.lo[1] + 1) + "x" +
                            std::to_string(bound.hi[2] - bound.lo[2] + 1) + " voxels");
         acc.reset(bound, memory_limit);
+        drag = Drag{};
         carried.assign(splatter->region_count(), {});
         if (!splat(regions, +1, progress)) throw SolverFailure("warp: a splat reached outside the bounds computed for it (internal error)");
         if (consumed) consumed->voxmap = SparseVoxmap(); // the splat was its last use: free it before the result grows
@@ -913,14 +973,40 @@ void Warp::move_control_point(int i, int j, int k, const Eigen::Vector3d& positi
     // (2/3)^3 d (the basis' largest tensor value) and their Jacobians by less, so the old boxes grown by d + 2
     // voxels bound the old and the new splats for the parity phases' disjointness check; the splat records
     // the exact new boxes.
-    const Lattice before = s.lattice;
     const double reach = (position - s.lattice.point(i, j, k)).norm() / s.domain.target_voxel_size + 2;
     const std::int64_t grow = reach < 1e9 ? std::int64_t(std::ceil(reach)) : std::int64_t(1e9);
-    for (auto idx : affected)
-        for (std::size_t a = 0; a < 3; ++a) s.boxes[idx].lo[a] -= grow, s.boxes[idx].hi[a] += grow;
+    auto grow_boxes = [&] {
+        Box bound;
+        for (auto idx : affected) {
+            for (std::size_t a = 0; a < 3; ++a) s.boxes[idx].lo[a] -= grow, s.boxes[idx].hi[a] += grow;
+            bound.include(s.boxes[idx]);
+        }
+        return bound;
+    };
+    const std::array<int, 3> point{i, j, k};
+    const Box bound = grow_boxes();
+    const Lattice before = s.lattice;
+    const Lattice* take_out = nullptr; // the lattice whose splat each region takes out first, if any
+    if (s.drag.point == point && !s.drag.reach.empty() && s.drag.reach.contains(bound)) {
+        s.restore_drag(); // the other regions' sums, as when the drag began
+    } else if (s.drag.point == point && !s.drag.refused) {
+        // The point's second move in a row: a drag. Take its regions' splat out, keep what is left as the drag's
+        // base, then splat them where they go.
+        s.splat(affected, -1, nullptr);
+        Box kept;
+        for (auto idx : affected) kept.include(s.boxes[idx]);
+        for (std::size_t a = 0; a < 3; ++a) kept.lo[a] -= State::kDragMargin, kept.hi[a] += State::kDragMargin;
+        if (!kept.empty()) s.keep_drag(point, kept);
+        grow_boxes();
+    } else {
+        // A first move: each region's splat out and in again in one pass, its cells still in cache for the second.
+        if (s.drag.point != point) s.drag = State::Drag{};
+        s.drag.point = point;
+        take_out = &before;
+    }
     s.lattice.set_point(i, j, k, position);
     Box after;
-    const bool inside_accumulator = s.splat(affected, +1, nullptr, &before);
+    const bool inside_accumulator = s.splat(affected, +1, nullptr, take_out);
     for (auto idx : affected) after.include(s.boxes[idx]);
     if (!inside_accumulator || !s.target.contains(after)) { // the moved regions reach outside the target: grow it
         s.full(nullptr);
