@@ -5,6 +5,7 @@
 // voxwarp keeps OBJ's, flipping on the way in and out.
 #include "gltf_io.h"
 #include "mesh_validate.h"
+#include "weld.h"
 
 #include <voxwarp/atomic_file.h>
 #include <voxwarp/errors.h>
@@ -148,14 +149,7 @@ TriangleMesh read_gltf(const std::string& path, bool binary, std::vector<std::st
         return it->second;
     };
     // Vertices welded by exact position, so that a model glTF split at its seams is closed again.
-    struct KeyHash {
-        std::size_t operator()(const Eigen::Vector3d& p) const {
-            std::uint64_t h = 1469598103934665603ull, u;
-            for (int a = 0; a < 3; ++a) std::memcpy(&u, &p[a], 8), h = (h ^ u) * 1099511628211ull;
-            return std::size_t(h);
-        }
-    };
-    std::unordered_map<Eigen::Vector3d, std::int32_t, KeyHash> weld;
+    std::unordered_map<Eigen::Vector3d, std::int32_t, PositionHash> weld;
     bool any_uv = false, any_normal = false, any_colour = false;
 
     auto add_primitive = [&](const tinygltf::Primitive& p, const Eigen::Matrix4d& transform, const std::string& where) {

@@ -14,7 +14,9 @@ namespace voxwarp {
 /// Read a mesh file as a plain polygon list (polygons fan-triangulated), keeping every face even at
 /// non-manifold edges and vertices (OpenMesh's halfedge mesh would drop those), but once: a triangle with the
 /// corners of an earlier one (in any order) is dropped, with a warning.
-/// Positions are world units as stored in the file.
+/// Positions are world units as stored in the file. glTF and PLY, which split a vertex wherever its texture
+/// coordinates or normals differ, have such vertices (exactly one position) joined again, each face corner keeping
+/// its own; a PLY without either is read as it is.
 /// @throw IOError when the file cannot be opened; InvalidInput when it is empty, unparsable, has
 ///        non-finite coordinates, or faces that index outside the vertex list.
 /// Problems that do not stop the reading (an OBJ's missing .mtl or texture, repeated faces) are appended to
