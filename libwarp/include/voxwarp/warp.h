@@ -109,7 +109,11 @@ public:
     Warp(Warp&&) noexcept;
     Warp& operator=(Warp&&) noexcept;
 
-    /// Move control point (i, j, k) to `position` (world units) and update the target incrementally.
+    /// Move control point (i, j, k) to `position` (world units) and update the target incrementally: the 64 regions
+    /// the point supports are splatted again, their last splat taken out first. Moving the same point again (a
+    /// drag) keeps, from its second move, the other regions' sums around it (at most an eighth of the memory limit)
+    /// and puts them back instead of taking the last splat out: about half the work a move. The target is the full
+    /// warp's, bit for bit, either way.
     /// If the moved regions now reach outside the target's bounds, the target grows and is recomputed in full.
     /// @throw InvalidInput for an index outside the lattice or a non-finite position; ResourceLimit when the target
     ///        would outgrow WarpOptions::max_memory_bytes (the warp is then spoilt: build a new one).
