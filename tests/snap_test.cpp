@@ -424,9 +424,10 @@ TEST(Snap, BentBoxFacesFollowTheExactWarp) {
 
 TEST(Snap, NoSnappedFaceOfTheBentBarFoldsOnItsFlatFaces) {
     // data/bar_bend.json keeps most of the bar's top and bottom in their planes (z = +-0.5) and leans its walls
-    // 40-50 degrees over them near its ends, where the crease is then sharper than a right angle. A refinement piece or a vertex snapped again, lying flat on the bottom but facing
-    // up, still looked along the wall's normal at its corner on the crease: 5 / 2 / 3 / 2 triangles with all three
-    // corners snapped onto a plane (within 1e-9) faced into the bar at 160 / 192 / 256 / 288.
+    // 40-50 degrees over them near its ends, where the crease is then sharper than a right angle. A refinement
+    // piece or a vertex snapped again, lying flat on the bottom but facing up, still looked along the wall's normal
+    // at its corner on the crease: 5 / 2 / 3 / 2 triangles with all three corners snapped onto a plane (within
+    // 1e-9) faced into the bar at 160 / 192 / 256 / 288.
     const TriangleMesh bar = read_mesh(test::data_path("bar.obj"));
     const EditScript script = read_edit_file(test::data_path("bar_bend.json"));
     const auto dir = std::filesystem::temp_directory_path() / ("voxwarp_bar_" + std::to_string(::getpid()));
