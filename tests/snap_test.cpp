@@ -47,6 +47,15 @@ SurfaceMesh surface_mesh(const TriangleMesh& m) {
 
 bool self_intersects(const TriangleMesh& m) { return CGAL::Polygon_mesh_processing::does_self_intersect(surface_mesh(m)); }
 
+/// `m` written to a file of the format `ext` (".ply", ".stl": 32-bit float positions) and read back.
+TriangleMesh through_file(const TriangleMesh& m, const std::string& ext) {
+    const auto path = std::filesystem::temp_directory_path() / ("voxwarp_snap_" + std::to_string(::getpid()) + ext);
+    write_mesh(m, path.string());
+    TriangleMesh back = read_mesh(path.string());
+    std::filesystem::remove(path);
+    return back;
+}
+
 /// Pairs of triangles that cross deeper than `depth` (world units), as indices into m.triangles: CGAL finds them
 /// meeting, and each passes through the other's plane by more than `depth` on both sides. Two that only touch at a
 /// common point (at a model's corner the feature mesher puts several fans' centres on one point, as distinct
@@ -430,8 +439,6 @@ TEST(Snap, NoSnappedFaceOfTheBentBarFoldsOnItsFlatFaces) {
     // 1e-9) faced into the bar at 160 / 192 / 256 / 288.
     const TriangleMesh bar = read_mesh(test::data_path("bar.obj"));
     const EditScript script = read_edit_file(test::data_path("bar_bend.json"));
-    const auto dir = std::filesystem::temp_directory_path() / ("voxwarp_bar_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir);
     for (const int resolution : {160, 192, 256, 288}) {
         DeformOptions options;
         options.voxelize.resolution = resolution;
@@ -452,11 +459,8 @@ TEST(Snap, NoSnappedFaceOfTheBentBarFoldsOnItsFlatFaces) {
         EXPECT_TRUE(topology(out).watertight());
         // Each fold met its neighbours once written in floats (CGAL found 30 / 8 / 29 / 8 pairs of faces meeting in
         // the PLY files; in doubles, none).
-        const std::string path = (dir / "bar.ply").string();
-        write_mesh(out, path);
-        EXPECT_FALSE(self_intersects(read_mesh(path))) << "at " << resolution;
+        EXPECT_FALSE(self_intersects(through_file(out, ".ply"))) << "at " << resolution;
     }
-    std::filesystem::remove_all(dir);
 }
 
 TEST(Snap, TheInputsCornersAndCreasesComeOutOnTheExactWarp) {
@@ -697,8 +701,6 @@ TEST(Snap, FacesOnVoxelPlanesStayApartInTheFloatFormats) {
     const TriangleMesh block = test::prism_mesh({{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}, 1.0);
     const EditScript block_edit = parse_edit_script(R"({"edits": [{"constraints": [
         {"move": [0, 0, 0], "to": [-0.04, -0.04, -0.02]}, {"pin": [2, 1, 1]}]}]})", "edit.json");
-    const auto dir = std::filesystem::temp_directory_path() / ("voxwarp_float_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir);
     struct Case {
         std::string name;
         TriangleMesh input;
@@ -713,9 +715,7 @@ TEST(Snap, FacesOnVoxelPlanesStayApartInTheFloatFormats) {
         ASSERT_FALSE(self_intersects(out)) << c.name; // in doubles, as extraction and snapping made it
         for (const char* ext : {".ply", ".stl"}) {
             SCOPED_TRACE(c.name + ext);
-            const std::string path = (dir / ("out" + std::string(ext))).string();
-            write_mesh(out, path);
-            const TriangleMesh back = read_mesh(path);
+            const TriangleMesh back = through_file(out, ext);
             std::set<std::array<double, 3>> positions;
             for (const auto& p : back.vertices) positions.insert({p.x(), p.y(), p.z()});
             EXPECT_EQ(positions.size(), out.vertices.size()) << "vertices merged by rounding to floats";
@@ -724,7 +724,6 @@ TEST(Snap, FacesOnVoxelPlanesStayApartInTheFloatFormats) {
             EXPECT_FALSE(self_intersects(back));
         }
     }
-    std::filesystem::remove_all(dir);
 }
 
 TEST(Snap, AScanWhoseSheetsAlmostTouchDoesNotFoldIntoItself) {

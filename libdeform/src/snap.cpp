@@ -2390,13 +2390,14 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
             // Nor folded flat onto a neighbour (its third corner within a thousandth of a voxel of the neighbour's
             // plane, the two facing apart): such a face can still look along the exact normal of a corner on a sharp
             // crease (the bar bend's ends). A thin part's ridge, as sharp but open, stays.
+            const Eigen::Vector3d unit = n.normalized();
             for (int k = 0; k < 3 && fine; ++k) {
                 const std::int32_t a = T[*f][std::size_t(k)], b = T[*f][std::size_t((k + 1) % 3)], c = T[*f][std::size_t((k + 2) % 3)];
                 const auto [ab, ae] = index.ring(std::size_t(a));
                 for (const std::uint32_t* g = ab; g != ae && fine; ++g) {
                     if (*g == *f || !has_side(T[*g], b, a)) continue;
                     const Eigen::Vector3d m = normal_of(T[*g]).normalized();
-                    fine = n.normalized().dot(m) > -kCornerFold || std::abs(m.dot(P[std::size_t(c)] - P[std::size_t(a)])) > 1e-3 * h;
+                    fine = unit.dot(m) > -kCornerFold || std::abs(m.dot(P[std::size_t(c)] - P[std::size_t(a)])) > 1e-3 * h;
                 }
             }
             const Box b = box_of(T[*f]);
