@@ -2077,6 +2077,40 @@ constexpr double kOffNormals = 0.6;
 /// Rounds of steps 7b and 8 (snap_again, flip_to_normals) at most.
 constexpr int kAgainRounds = 3;
 
+/// The triangles that meet a neighbour across a side at more than kSteep (a fold, one across a crease, or on
+/// either side of one), sorted: where step 8 looks first, and where step 9 looks for folds (of those, the ones
+/// still there after steps 7b and 8, which move and flip only around these or refuse a fold).
+std::vector<std::uint32_t> steep_sides(const TriangleMesh& output, const OutputIndex& index) {
+    const auto& P = output.vertices;
+    const auto& T = output.triangles;
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
+    // Each side once, from the triangle that has it running from its lower corner to its higher.
+    std::vector<std::uint32_t> suspects = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, T.size(), 8192), std::vector<std::uint32_t>(),
+        [&](const auto& r, std::vector<std::uint32_t> found) {
+            for (std::size_t f = r.begin(); f != r.end(); ++f) {
+                Eigen::Vector3d n = Eigen::Vector3d::Zero();
+                for (int k = 0; k < 3; ++k) {
+                    const std::int32_t a = T[f][std::size_t(k)], b = T[f][std::size_t((k + 1) % 3)];
+                    if (a > b) continue;
+                    if (n.isZero()) n = normal_of(T[f]);
+                    const auto [begin, end] = index.ring(std::size_t(a));
+                    for (const std::uint32_t* q = begin; q != end; ++q)
+                        if (*q != f && std::find(T[*q].begin(), T[*q].end(), b) != T[*q].end()) {
+                            const Eigen::Vector3d m = normal_of(T[*q]);
+                            if (n.dot(m) < kSteep * n.norm() * m.norm()) found.push_back(std::uint32_t(f)), found.push_back(*q);
+                            break;
+                        }
+                }
+            }
+            return found;
+        },
+        concat<std::uint32_t>);
+    tbb::parallel_sort(suspects.begin(), suspects.end());
+    suspects.erase(std::unique(suspects.begin(), suspects.end()), suspects.end());
+    return suspects;
+}
+
 /// Step 8: flips sides where the triangles on either side turn from the exact surface. With every vertex on the
 /// exact warp, the triangulation can still cut under it: a triangle from one face of a sharp crease to the other
 /// (the ear's rim, 0.37 voxel under the exact warp), or one folded flat onto its neighbours (an in-plane fold, as
@@ -2093,38 +2127,9 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
     auto& T = output.triangles;
     if (!output.quads.empty() || T.empty() || sources.size() != P.size()) return 0;
     auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
-    // Cheap first: a triangle that meets a neighbour at more than kSteep (a fold, or one across a crease, or on
-    // either side of one); only those are judged by their sources. `only`: these triangles instead. (Vertex
-    // normals would do, but an array of them is megabytes of fresh pages: 40 ms at 256.)
-    std::vector<std::uint32_t> suspects;
-    if (only) {
-        suspects = *only;
-    } else {
-        // Each side once, from the triangle that has it running from its lower corner to its higher.
-        suspects = tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, T.size(), 8192), std::vector<std::uint32_t>(),
-            [&](const auto& r, std::vector<std::uint32_t> found) {
-                for (std::size_t f = r.begin(); f != r.end(); ++f) {
-                    Eigen::Vector3d n = Eigen::Vector3d::Zero();
-                    for (int k = 0; k < 3; ++k) {
-                        const std::int32_t a = T[f][std::size_t(k)], b = T[f][std::size_t((k + 1) % 3)];
-                        if (a > b) continue;
-                        if (n.isZero()) n = normal_of(T[f]);
-                        const auto [begin, end] = index.ring(std::size_t(a));
-                        for (const std::uint32_t* q = begin; q != end; ++q)
-                            if (*q != f && std::find(T[*q].begin(), T[*q].end(), b) != T[*q].end()) {
-                                const Eigen::Vector3d m = normal_of(T[*q]);
-                                if (n.dot(m) < kSteep * n.norm() * m.norm()) found.push_back(std::uint32_t(f)), found.push_back(*q);
-                                break;
-                            }
-                    }
-                }
-                return found;
-            },
-            concat<std::uint32_t>);
-        tbb::parallel_sort(suspects.begin(), suspects.end());
-        suspects.erase(std::unique(suspects.begin(), suspects.end()), suspects.end());
-    }
+    // Cheap first: the triangles steep_sides finds (`only`: these instead); only those are judged by their
+    // sources. (Vertex normals would do, but an array of them is megabytes of fresh pages: 40 ms at 256.)
+    const std::vector<std::uint32_t> suspects = only ? *only : steep_sides(output, index);
     if (suspects.empty()) return 0;
     // The exact normals at a vertex: of the faces at its source point (one inside a face, those sharing a side or a
     // corner), pushed forward; none without a source. Worked out once each.
@@ -2425,6 +2430,158 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
         ++count;
         moved.insert(moved.end(), begin, end);
         for (const std::uint32_t* f = begin; f != end; ++f) moved_in.file(*f, box_of(T[*f]));
+    }
+    std::sort(moved.begin(), moved.end());
+    moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
+    if (!moved.empty()) index.update(output, moved);
+    return moved;
+}
+
+/// Passes of unfold at most: a corner moved may let one beside it move in the next.
+constexpr int kUnfoldPasses = 3;
+/// Radians two triangles across a side may turn beyond the exact normals at their corners before they count as a
+/// fold (unfold): 20 degrees.
+constexpr double kFoldSlack = 20.0 * std::numbers::pi / 180.0;
+
+/// Step 9: folds left. Where snapping moved some vertices of a patch and not others, or refinement put points in
+/// beside vertices left where extraction made them, two triangles across a side can face apart though neither
+/// turned over: a fin standing on a flat side (the bar bend at 128 had 26, along its sides' edges, where marching
+/// cubes left slivers: the sides lie on voxel planes), or a pleat. Such a fold is one where the two face apart by
+/// more than acos(-kCornerFold) and lie flat on each other, or turn further apart than the exact normals at any
+/// two of their corners do, and kFoldSlack more (a thin part's ridge, as sharp, has its two sides' normals). Each
+/// corner of a fold left off its exact image tries its image (when within max_move), the middle of the corners
+/// around it projected onto the exact tangent plane at the image, and the middle itself; one on its image only
+/// the projected middle (on a flat face it stays on the face). It takes the first that leaves fewer folds around
+/// it and no triangle there collapsed, facing against the exact normal at every corner, or crossing one near it.
+/// Looks at the sides of the triangles `look` lists. Returns the triangles around the corners moved.
+std::vector<std::uint32_t> unfold(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
+                                  const std::vector<WarpStep>& steps, OutputIndex& index, double h, double max_move, const std::vector<std::uint32_t>& look) {
+    auto& P = output.vertices;
+    const auto& T = output.triangles;
+    if (!output.quads.empty() || T.empty() || sources.size() != P.size()) return {};
+    auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
+    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
+    auto exact_normal = [&](std::int32_t v) {
+        const SourcePoint& s = sources[std::size_t(v)];
+        return s.face < 0 ? Eigen::Vector3d::Zero() : push_normal(steps, surface.position(s), surface.normal[std::size_t(s.face)]).normalized();
+    };
+    // The neighbour of triangle f across its side k, or -1.
+    auto across = [&](std::uint32_t f, int k) -> std::int64_t {
+        const std::int32_t a = T[f][std::size_t(k)], b = T[f][std::size_t((k + 1) % 3)];
+        const auto [begin, end] = index.ring(std::size_t(a));
+        for (const std::uint32_t* g = begin; g != end; ++g)
+            if (*g != f && has_side(T[*g], b, a)) return *g;
+        return -1;
+    };
+    // Whether f and g, across f's side k, fold (cheap test first: facing apart at all).
+    auto fold = [&](std::uint32_t f, std::uint32_t g, int k) {
+        const Eigen::Vector3d n = normal_of(T[f]), m = normal_of(T[g]);
+        if (n.dot(m) >= 0 || n.norm() == 0 || m.norm() == 0) return false;
+        const Eigen::Vector3d nu = n.normalized(), mu = m.normalized();
+        if (nu.dot(mu) >= -kCornerFold) return false;
+        const std::int32_t a = T[f][std::size_t(k)], c = T[f][std::size_t((k + 2) % 3)];
+        if (std::abs(mu.dot(P[std::size_t(c)] - P[std::size_t(a)])) <= 1e-3 * h) return true;
+        // The widest turn between the exact normals at a corner of each: the two sides of a thin part's ridge turn
+        // as far as the triangles on them, one face and the crease beside it no further than the crease.
+        double widest = 1;
+        for (const std::int32_t x : T[f])
+            for (const std::int32_t y : T[g]) widest = std::min(widest, exact_normal(x).dot(exact_normal(y)));
+        return std::acos(std::clamp(nu.dot(mu), -1.0, 1.0)) > std::acos(std::clamp(widest, -1.0, 1.0)) + kFoldSlack;
+    };
+    std::vector<std::int32_t> corners = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, look.size(), 1024), std::vector<std::int32_t>(),
+        [&](const auto& r, std::vector<std::int32_t> found) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i)
+                for (int k = 0; k < 3; ++k) {
+                    const std::size_t f = look[i];
+                    const std::int64_t g = across(std::uint32_t(f), k);
+                    if (g < 0 || !fold(std::uint32_t(f), std::uint32_t(g), k)) continue;
+                    found.insert(found.end(), T[f].begin(), T[f].end());
+                    found.insert(found.end(), T[std::size_t(g)].begin(), T[std::size_t(g)].end());
+                }
+            return found;
+        },
+        concat<std::int32_t>);
+    if (corners.empty()) return {};
+    std::sort(corners.begin(), corners.end());
+    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+    const double tiny = 1e-4 * h * h;
+    // The folds among the triangles around v and their neighbours.
+    auto folds_around = [&](std::int32_t v) {
+        std::size_t count = 0;
+        const auto [begin, end] = index.ring(std::size_t(v));
+        for (const std::uint32_t* f = begin; f != end; ++f)
+            for (int k = 0; k < 3; ++k) {
+                const std::int64_t g = across(*f, k);
+                count += g >= 0 && fold(*f, std::uint32_t(g), k);
+            }
+        return count;
+    };
+    std::vector<std::uint32_t> moved;
+    ChangedCells moved_in(h);
+    std::vector<std::uint32_t> near;
+    for (const std::int32_t v : corners) {
+        const std::size_t was = folds_around(v);
+        if (was == 0) continue;
+        const auto [begin, end] = index.ring(std::size_t(v));
+        if (begin == end) continue;
+        const Eigen::Vector3d from = P[std::size_t(v)];
+        Eigen::Vector3d middle = Eigen::Vector3d::Zero();
+        std::size_t others = 0;
+        for (const std::uint32_t* f = begin; f != end; ++f)
+            for (const std::int32_t c : T[*f])
+                if (c != v) middle += P[std::size_t(c)], ++others; // each neighbour twice on a closed ring
+        middle /= double(std::max<std::size_t>(others, 1));
+        // A vertex on its exact image moves only in the exact tangent plane there (onto which the middle is
+        // projected), so that one on a flat face stays on it; one left off it tries its image, the middle
+        // projected onto the tangent plane at its image, and the middle itself.
+        const SourcePoint& source = sources[std::size_t(v)];
+        Eigen::Vector3d image = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN()), e = Eigen::Vector3d::Zero();
+        if (source.face >= 0) image = push_forward(steps, surface.position(source)), e = exact_normal(v);
+        const bool reachable = image.allFinite() && e.allFinite() && (image - from).norm() <= max_move;
+        std::vector<Eigen::Vector3d> tries;
+        if (reachable) tries.push_back(middle - (middle - image).dot(e) * e);
+        if (!reachable || (image - from).norm() > 1e-6 * h) {
+            if (reachable) tries.insert(tries.begin(), image);
+            tries.push_back(middle);
+        }
+        bool fine = false;
+        for (const Eigen::Vector3d& p : tries) {
+            P[std::size_t(v)] = p;
+            fine = true;
+            TriangleBox reach = box_of(P, T[*begin]);
+            for (const std::uint32_t* f = begin; f != end && fine; ++f) {
+                const Eigen::Vector3d n = normal_of(T[*f]);
+                bool along = false;
+                for (const std::int32_t c : T[*f]) along |= n.dot(exact_normal(c)) > 0;
+                fine = n.norm() > tiny && along;
+                const TriangleBox b = box_of(P, T[*f]);
+                reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
+            }
+            fine = fine && folds_around(v) < was;
+            if (fine) {
+                near.clear();
+                index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
+                moved_in.near(reach, [&](std::uint32_t q) {
+                    if (boxes_meet(box_of(P, T[q]), reach)) near.push_back(q);
+                });
+                for (const std::uint32_t* f = begin; f != end && fine; ++f) {
+                    const TriangleBox b = box_of(P, T[*f]);
+                    for (const std::uint32_t q : near)
+                        if (std::find(begin, end, q) == end && boxes_meet(box_of(P, T[q]), b) && triangles_cross(at, T[*f], T[q])) {
+                            fine = false;
+                            break;
+                        }
+                }
+            }
+            if (fine) break;
+        }
+        if (!fine) {
+            P[std::size_t(v)] = from;
+            continue;
+        }
+        moved.insert(moved.end(), begin, end);
+        for (const std::uint32_t* f = begin; f != end; ++f) moved_in.file(*f, box_of(P, T[*f]));
     }
     std::sort(moved.begin(), moved.end());
     moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
@@ -2843,13 +3000,32 @@ std::size_t refine_with(TriangleMesh& output, std::vector<SourcePoint>& sources,
         // Steps 7b and 8 in turn: the flips around a vertex that could not move may let it move next time.
         const std::vector<Eigen::Vector3d> target = targets_again(output, sources, surface, steps, left, max_move);
         std::size_t again = 0;
+        std::vector<std::uint32_t> watch; // where step 9 looks: steep_sides as step 8 first saw them, and those moved since
         for (int round = 0; round < kAgainRounds; ++round) {
             const std::size_t was = again;
             const std::vector<std::uint32_t> moved = snap_again(output, sources, surface, steps, left, target, index, h, again);
             if (round > 0 && again == was) break;
             // The first round looks at the whole output; later ones around the vertices the last one moved.
-            flip_to_normals(output, sources, surface, steps, index, home, h, round == 0 ? nullptr : &moved);
+            if (round == 0) watch = steep_sides(output, index);
+            else watch.insert(watch.end(), moved.begin(), moved.end());
+            flip_to_normals(output, sources, surface, steps, index, home, h, round == 0 ? &watch : &moved);
             if (again == was) break;
+        }
+        std::sort(watch.begin(), watch.end());
+        watch.erase(std::unique(watch.begin(), watch.end()), watch.end());
+        // Step 9, the first pass over `watch`, later ones over the triangles around those the last moved.
+        std::vector<std::uint32_t> unfolded;
+        for (int pass = 0; pass < kUnfoldPasses; ++pass) {
+            std::vector<std::uint32_t> around;
+            for (const std::uint32_t f : unfolded)
+                for (const std::int32_t c : output.triangles[f]) {
+                    const auto [begin, end] = index.ring(std::size_t(c));
+                    around.insert(around.end(), begin, end);
+                }
+            std::sort(around.begin(), around.end());
+            around.erase(std::unique(around.begin(), around.end()), around.end());
+            unfolded = unfold(output, sources, surface, steps, index, h, max_move, pass == 0 ? watch : around);
+            if (unfolded.empty()) break;
         }
         if (snapped_again) *snapped_again = again;
     }
