@@ -471,7 +471,7 @@ TEST(Snap, NoTwoFacesAcrossASideFoldOntoEachOther) {
     // fold, a fin standing on a flat side or a pleat, whatever made it. Where marching cubes left slivers along the
     // bar's edges (its sides lie on voxel planes), a vertex snapping left behind while those around it moved stood
     // as a fin up to half a voxel tall; the feature mesher's fans leave pleats. At 128, before folds were mended
-    // (step 9): bar 29 (marching cubes) and 125 (feature mesher), box 4 and 8. Measured since: 7, 22, 3, 0.
+    // (step 9): bar 29 (marching cubes) and 125 (feature mesher), box 4 and 8. Measured since: 7, 18, 3, 0.
     const TriangleMesh bar = read_mesh(test::data_path("bar.obj")), box = read_mesh(test::data_path("box.obj"));
     std::size_t total = 0;
     for (const auto& [mesh, edit] : {std::pair{&bar, "bar_bend.json"}, {&box, "box_bend.json"}})

@@ -30,6 +30,7 @@
 #include <deque>
 #include <limits>
 #include <memory>
+#include <map>
 #include <numeric>
 #include <numbers>
 #include <optional>
@@ -2439,6 +2440,8 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
 
 /// Passes of unfold at most: a corner moved may let one beside it move in the next.
 constexpr int kUnfoldPasses = 3;
+/// Steps a tangle of fold corners relaxes by together (unfold).
+constexpr int kRelaxSteps = 8;
 /// Radians two triangles across a side may turn beyond the exact normals at their corners before they count as a
 /// fold (unfold): 20 degrees.
 constexpr double kFoldSlack = 20.0 * std::numbers::pi / 180.0;
@@ -2520,68 +2523,133 @@ std::vector<std::uint32_t> unfold(TriangleMesh& output, const std::vector<Source
     std::vector<std::uint32_t> moved;
     ChangedCells moved_in(h);
     std::vector<std::uint32_t> near;
+    // Whether the triangles `faces` (those around the corners that moved) all have area, look along the exact
+    // normal at a corner each, and cross none of the triangles near them.
+    auto faces_fine = [&](const std::vector<std::uint32_t>& faces) {
+        TriangleBox reach = box_of(P, T[faces.front()]);
+        for (const std::uint32_t f : faces) {
+            const Eigen::Vector3d n = normal_of(T[f]);
+            bool along = false;
+            for (const std::int32_t c : T[f]) along |= n.dot(exact_normal(c)) > 0;
+            if (n.norm() <= tiny || !along) return false;
+            const TriangleBox b = box_of(P, T[f]);
+            reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
+        }
+        near.clear();
+        index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
+        moved_in.near(reach, [&](std::uint32_t q) {
+            if (boxes_meet(box_of(P, T[q]), reach)) near.push_back(q);
+        });
+        for (const std::uint32_t f : faces) {
+            const TriangleBox b = box_of(P, T[f]);
+            for (const std::uint32_t q : near)
+                if (!std::binary_search(faces.begin(), faces.end(), q) && boxes_meet(box_of(P, T[q]), b) && triangles_cross(at, T[f], T[q])) return false;
+        }
+        return true;
+    };
+    // The middle of the vertices around v (each twice on a closed ring), and where v may go toward it: a vertex on
+    // its exact image only in the exact tangent plane there (onto which the middle is projected), so that one on a
+    // flat face stays on it; one left off it to its image, the projected middle, or the middle itself.
+    struct Place {
+        Eigen::Vector3d middle, image, normal = Eigen::Vector3d::Zero();
+        bool reachable = false, on_image = false;
+        Eigen::Vector3d toward(const Eigen::Vector3d& x) const { return reachable ? Eigen::Vector3d(x - (x - image).dot(normal) * normal) : x; }
+    };
+    auto middle_of = [&](std::int32_t v) {
+        Eigen::Vector3d middle = Eigen::Vector3d::Zero();
+        const auto [begin, end] = index.ring(std::size_t(v));
+        std::size_t others = 0;
+        for (const std::uint32_t* f = begin; f != end; ++f)
+            for (const std::int32_t c : T[*f])
+                if (c != v) middle += P[std::size_t(c)], ++others;
+        return Eigen::Vector3d(middle / double(std::max<std::size_t>(others, 1)));
+    };
+    auto place_of = [&](std::int32_t v) {
+        Place w;
+        w.middle = middle_of(v);
+        const SourcePoint& source = sources[std::size_t(v)];
+        w.image = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+        if (source.face >= 0) w.image = push_forward(steps, surface.position(source)), w.normal = exact_normal(v);
+        const Eigen::Vector3d& from = P[std::size_t(v)];
+        w.reachable = w.image.allFinite() && w.normal.allFinite() && (w.image - from).norm() <= max_move;
+        w.on_image = w.reachable && (w.image - from).norm() <= 1e-6 * h;
+        return w;
+    };
+    std::vector<std::int32_t> stuck; // corners no move of their own mends
+    std::vector<std::uint32_t> faces;
     for (const std::int32_t v : corners) {
         const std::size_t was = folds_around(v);
         if (was == 0) continue;
         const auto [begin, end] = index.ring(std::size_t(v));
         if (begin == end) continue;
+        faces.assign(begin, end);
+        std::sort(faces.begin(), faces.end());
         const Eigen::Vector3d from = P[std::size_t(v)];
-        Eigen::Vector3d middle = Eigen::Vector3d::Zero();
-        std::size_t others = 0;
-        for (const std::uint32_t* f = begin; f != end; ++f)
-            for (const std::int32_t c : T[*f])
-                if (c != v) middle += P[std::size_t(c)], ++others; // each neighbour twice on a closed ring
-        middle /= double(std::max<std::size_t>(others, 1));
-        // A vertex on its exact image moves only in the exact tangent plane there (onto which the middle is
-        // projected), so that one on a flat face stays on it; one left off it tries its image, the middle
-        // projected onto the tangent plane at its image, and the middle itself.
-        const SourcePoint& source = sources[std::size_t(v)];
-        Eigen::Vector3d image = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN()), e = Eigen::Vector3d::Zero();
-        if (source.face >= 0) image = push_forward(steps, surface.position(source)), e = exact_normal(v);
-        const bool reachable = image.allFinite() && e.allFinite() && (image - from).norm() <= max_move;
+        const Place w = place_of(v);
         std::vector<Eigen::Vector3d> tries;
-        if (reachable) tries.push_back(middle - (middle - image).dot(e) * e);
-        if (!reachable || (image - from).norm() > 1e-6 * h) {
-            if (reachable) tries.insert(tries.begin(), image);
-            tries.push_back(middle);
-        }
+        if (w.reachable && !w.on_image) tries.push_back(w.image);
+        if (w.reachable) tries.push_back(w.toward(w.middle));
+        if (!w.on_image) tries.push_back(w.middle);
         bool fine = false;
         for (const Eigen::Vector3d& p : tries) {
             P[std::size_t(v)] = p;
-            fine = true;
-            TriangleBox reach = box_of(P, T[*begin]);
-            for (const std::uint32_t* f = begin; f != end && fine; ++f) {
-                const Eigen::Vector3d n = normal_of(T[*f]);
-                bool along = false;
-                for (const std::int32_t c : T[*f]) along |= n.dot(exact_normal(c)) > 0;
-                fine = n.norm() > tiny && along;
-                const TriangleBox b = box_of(P, T[*f]);
-                reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
-            }
-            fine = fine && folds_around(v) < was;
-            if (fine) {
-                near.clear();
-                index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
-                moved_in.near(reach, [&](std::uint32_t q) {
-                    if (boxes_meet(box_of(P, T[q]), reach)) near.push_back(q);
-                });
-                for (const std::uint32_t* f = begin; f != end && fine; ++f) {
-                    const TriangleBox b = box_of(P, T[*f]);
-                    for (const std::uint32_t q : near)
-                        if (std::find(begin, end, q) == end && boxes_meet(box_of(P, T[q]), b) && triangles_cross(at, T[*f], T[q])) {
-                            fine = false;
-                            break;
-                        }
-                }
-            }
+            fine = folds_around(v) < was && faces_fine(faces);
             if (fine) break;
         }
         if (!fine) {
             P[std::size_t(v)] = from;
+            stuck.push_back(v);
             continue;
         }
         moved.insert(moved.end(), begin, end);
-        for (const std::uint32_t* f = begin; f != end; ++f) moved_in.file(*f, box_of(P, T[*f]));
+        for (const std::uint32_t f : faces) moved_in.file(f, box_of(P, T[f]));
+    }
+    // A tangle of several corners (the feature mesher's fans meeting on a flat face) no one move mends: each group
+    // of stuck corners joined by triangles relaxes together, kRelaxSteps steps each to the middle of its own ring
+    // (as above: in its tangent plane when on its image), and keeps that where the group's folds drop, under the
+    // same tests.
+    std::unordered_map<std::int32_t, std::size_t> slot;
+    for (std::size_t i = 0; i < stuck.size(); ++i) slot[stuck[i]] = i;
+    std::vector<std::size_t> parent(stuck.size());
+    std::iota(parent.begin(), parent.end(), std::size_t(0));
+    auto root = [&](std::size_t i) {
+        while (parent[i] != i) i = parent[i] = parent[parent[i]];
+        return i;
+    };
+    for (std::size_t i = 0; i < stuck.size(); ++i) {
+        const auto [begin, end] = index.ring(std::size_t(stuck[i]));
+        for (const std::uint32_t* f = begin; f != end; ++f)
+            for (const std::int32_t c : T[*f])
+                if (const auto it = slot.find(c); it != slot.end()) parent[root(it->second)] = root(i);
+    }
+    std::map<std::size_t, std::vector<std::int32_t>> groups; // by root, for an order that does not hash
+    for (std::size_t i = 0; i < stuck.size(); ++i) groups[root(i)].push_back(stuck[i]);
+    for (const auto& [r, group] : groups) {
+        if (group.size() < 2) continue;
+        std::size_t was = 0;
+        faces.clear();
+        for (const std::int32_t v : group) {
+            was += folds_around(v);
+            const auto [begin, end] = index.ring(std::size_t(v));
+            faces.insert(faces.end(), begin, end);
+        }
+        std::sort(faces.begin(), faces.end());
+        faces.erase(std::unique(faces.begin(), faces.end()), faces.end());
+        std::vector<Eigen::Vector3d> from(group.size()), to(group.size());
+        std::vector<Place> places(group.size());
+        for (std::size_t i = 0; i < group.size(); ++i) from[i] = P[std::size_t(group[i])], places[i] = place_of(group[i]);
+        for (int step = 0; step < kRelaxSteps; ++step) {
+            for (std::size_t i = 0; i < group.size(); ++i) to[i] = places[i].toward(middle_of(group[i]));
+            for (std::size_t i = 0; i < group.size(); ++i) P[std::size_t(group[i])] = to[i];
+        }
+        std::size_t now = 0;
+        for (const std::int32_t v : group) now += folds_around(v);
+        if (now < was && faces_fine(faces)) {
+            moved.insert(moved.end(), faces.begin(), faces.end());
+            for (const std::uint32_t f : faces) moved_in.file(f, box_of(P, T[f]));
+        } else {
+            for (std::size_t i = 0; i < group.size(); ++i) P[std::size_t(group[i])] = from[i];
+        }
     }
     std::sort(moved.begin(), moved.end());
     moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
