@@ -2456,7 +2456,8 @@ constexpr double kFoldSlack = 20.0 * std::numbers::pi / 180.0;
 /// around it projected onto the exact tangent plane at the image, and the middle itself; one on its image only
 /// the projected middle (on a flat face it stays on the face). It takes the first that leaves fewer folds around
 /// it and no triangle there collapsed, facing against the exact normal at every corner, or crossing one near it.
-/// Looks at the sides of the triangles `look` lists. Returns the triangles around the corners moved.
+/// Corners that no move of their own mends relax together, by groups joined by triangles (below). Looks at the
+/// sides of the triangles `look` lists. Returns the triangles around the corners moved.
 std::vector<std::uint32_t> unfold(TriangleMesh& output, const std::vector<SourcePoint>& sources, const SourceSurface::Impl& surface,
                                   const std::vector<WarpStep>& steps, OutputIndex& index, double h, double max_move, const std::vector<std::uint32_t>& look) {
     auto& P = output.vertices;
