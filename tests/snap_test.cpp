@@ -23,8 +23,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
-#include <map>
 #include <iostream>
+#include <map>
 #include <numbers>
 #include <random>
 #include <set>
