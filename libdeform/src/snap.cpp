@@ -1797,6 +1797,37 @@ private:
     std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells_;
 };
 
+/// Into `near` (some more than once): the triangles that may meet box `reach`, those `index` files near it where they
+/// were and those `changed` files since whose boxes now meet it (flip_to_normals, snap_again, unfold).
+void gather_near(const TriangleMesh& output, const OutputIndex& index, const ChangedCells& changed, const TriangleBox& reach, std::vector<std::uint32_t>& near) {
+    near.clear();
+    index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
+    changed.near(reach, [&](std::uint32_t q) {
+        if (boxes_meet(box_of(output.vertices, output.triangles[q]), reach)) near.push_back(q);
+    });
+}
+
+/// Whether a triangle of [begin, end) (those around a vertex moved, or a group's), its corners where they are now,
+/// crosses one near it that is not one of them (snap_again, unfold). `near`: scratch.
+bool moved_faces_cross(const TriangleMesh& output, const OutputIndex& index, const ChangedCells& changed, const std::uint32_t* begin, const std::uint32_t* end,
+                       std::vector<std::uint32_t>& near) {
+    const auto& P = output.vertices;
+    const auto& T = output.triangles;
+    TriangleBox reach = box_of(P, T[*begin]);
+    for (const std::uint32_t* f = begin; f != end; ++f) {
+        const TriangleBox b = box_of(P, T[*f]);
+        reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
+    }
+    gather_near(output, index, changed, reach, near);
+    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
+    for (const std::uint32_t* f = begin; f != end; ++f) {
+        const TriangleBox b = box_of(P, T[*f]);
+        for (const std::uint32_t q : near)
+            if (std::find(begin, end, q) == end && boxes_meet(box_of(P, T[q]), b) && triangles_cross(at, T[*f], T[q])) return true;
+    }
+    return false;
+}
+
 /// The output's edges along the input's creases. Points of a crease come into the output put in (insert_points),
 /// split on it (refine_with) or snapped onto a convex ridge, but two that follow each other along it are often not
 /// joined by an edge: the triangles between them cross the crease and cut under it. Of the bunny ear edit's pairs
@@ -2278,11 +2309,7 @@ std::size_t flip_to_normals(TriangleMesh& output, const std::vector<SourcePoint>
                 // Not through a triangle near it: those the index files near, and those flipped in this pass.
                 const Box box1 = box_of(one), box2 = box_of(two);
                 const Box reach{box1.first.cwiseMin(box2.first), box1.second.cwiseMax(box2.second)};
-                near.clear();
-                index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
-                flipped_in.near(reach, [&](std::uint32_t q) {
-                    if (meet(box_of(T[q]), reach)) near.push_back(q);
-                });
+                gather_near(output, index, flipped_in, reach, near);
                 const bool crosses = std::any_of(near.begin(), near.end(), [&](std::uint32_t q) {
                     if (q == f || q == flip.g) return false;
                     const Box bq = box_of(T[q]);
@@ -2363,10 +2390,7 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
     auto& P = output.vertices;
     const auto& T = output.triangles;
     auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
-    using Box = TriangleBox;
     auto box_of = [&](const std::array<std::int32_t, 3>& t) { return voxwarp::box_of(P, t); };
-    auto meet = boxes_meet;
-    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
     auto exact_normal = [&](std::int32_t v) {
         const SourcePoint& s = sources[std::size_t(v)];
         return s.face < 0 ? Eigen::Vector3d::Zero() : push_normal(steps, surface.position(s), surface.normal[std::size_t(s.face)]);
@@ -2385,7 +2409,6 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
         const Eigen::Vector3d from = P[std::size_t(v)];
         P[std::size_t(v)] = target[i];
         bool fine = true;
-        Box reach = box_of(T[*begin]);
         for (const std::uint32_t* f = begin; f != end && fine; ++f) {
             const Eigen::Vector3d n = normal_of(T[*f]);
             fine = n.norm() > tiny && n.dot(before[std::size_t(f - begin)]) > 0;
@@ -2406,25 +2429,8 @@ std::vector<std::uint32_t> snap_again(TriangleMesh& output, const std::vector<So
                     fine = unit.dot(m) > -kCornerFold || std::abs(m.dot(P[std::size_t(c)] - P[std::size_t(a)])) > 1e-3 * h;
                 }
             }
-            const Box b = box_of(T[*f]);
-            reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
         }
-        if (fine) {
-            near.clear();
-            index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
-            moved_in.near(reach, [&](std::uint32_t q) {
-                if (meet(box_of(T[q]), reach)) near.push_back(q);
-            });
-            for (const std::uint32_t* f = begin; f != end && fine; ++f) {
-                const Box b = box_of(T[*f]);
-                for (const std::uint32_t q : near)
-                    if (std::find(begin, end, q) == end && meet(box_of(T[q]), b) && triangles_cross(at, T[*f], T[q])) {
-                        fine = false;
-                        break;
-                    }
-            }
-        }
-        if (!fine) {
+        if (!fine || moved_faces_cross(output, index, moved_in, begin, end, near)) {
             P[std::size_t(v)] = from;
             continue;
         }
@@ -2464,7 +2470,6 @@ std::vector<std::uint32_t> unfold(TriangleMesh& output, const std::vector<Source
     const auto& T = output.triangles;
     if (!output.quads.empty() || T.empty() || sources.size() != P.size()) return {};
     auto normal_of = [&](const std::array<std::int32_t, 3>& t) { return triangle_normal(P, t); };
-    auto at = [&](std::int32_t i) -> const Eigen::Vector3d& { return P[std::size_t(i)]; };
     auto exact_normal = [&](std::int32_t v) {
         const SourcePoint& s = sources[std::size_t(v)];
         return s.face < 0 ? Eigen::Vector3d::Zero() : push_normal(steps, surface.position(s), surface.normal[std::size_t(s.face)]).normalized();
@@ -2527,26 +2532,13 @@ std::vector<std::uint32_t> unfold(TriangleMesh& output, const std::vector<Source
     // Whether the triangles `faces` (those around the corners that moved) all have area, look along the exact
     // normal at a corner each, and cross none of the triangles near them.
     auto faces_fine = [&](const std::vector<std::uint32_t>& faces) {
-        TriangleBox reach = box_of(P, T[faces.front()]);
         for (const std::uint32_t f : faces) {
             const Eigen::Vector3d n = normal_of(T[f]);
             bool along = false;
             for (const std::int32_t c : T[f]) along |= n.dot(exact_normal(c)) > 0;
             if (n.norm() <= tiny || !along) return false;
-            const TriangleBox b = box_of(P, T[f]);
-            reach.first = reach.first.cwiseMin(b.first), reach.second = reach.second.cwiseMax(b.second);
         }
-        near.clear();
-        index.meeting(reach.first, reach.second, [&](std::uint32_t q) { near.push_back(q); });
-        moved_in.near(reach, [&](std::uint32_t q) {
-            if (boxes_meet(box_of(P, T[q]), reach)) near.push_back(q);
-        });
-        for (const std::uint32_t f : faces) {
-            const TriangleBox b = box_of(P, T[f]);
-            for (const std::uint32_t q : near)
-                if (!std::binary_search(faces.begin(), faces.end(), q) && boxes_meet(box_of(P, T[q]), b) && triangles_cross(at, T[f], T[q])) return false;
-        }
-        return true;
+        return !moved_faces_cross(output, index, moved_in, faces.data(), faces.data() + faces.size(), near);
     };
     // The middle of the vertices around v (each twice on a closed ring), and where v may go toward it: a vertex on
     // its exact image only in the exact tangent plane there (onto which the middle is projected), so that one on a
