@@ -30,12 +30,11 @@ namespace {
 /// A feature surface's triangles filed by the cells their bounding boxes touch (CellBuckets).
 class TriangleGrid {
 public:
-    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s), cells_(v), near_(v), boxes_(s.triangles.size()) {
+    TriangleGrid(const TriangleMesh& s, const SparseVoxmap& v) : surface_(s), cells_(v), near_(v) {
+        cells_.reserve(s.triangles.size());
         for (std::size_t t = 0; t < s.triangles.size(); ++t) {
-            const auto& f = s.triangles[t];
-            const Eigen::Vector3d &a = s.vertices[std::size_t(f[0])], &b = s.vertices[std::size_t(f[1])], &c = s.vertices[std::size_t(f[2])];
-            const Eigen::Vector3d lo = v.index_of(a.cwiseMin(b).cwiseMin(c)), hi = v.index_of(a.cwiseMax(b).cwiseMax(c));
-            boxes_[t] = {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)};
+            const auto [box_lo, box_hi] = box(t);
+            const Eigen::Vector3d lo = v.index_of(box_lo), hi = v.index_of(box_hi);
             if (((hi - lo).array() > 64).any()) continue; // not a voxel-sized piece: the surface was not cut for this voxmap
             cells_.add(lo, hi, std::uint32_t(t));
             // Its cells grown by one: hit() and nearest() around a cell read it and its neighbours.
@@ -57,8 +56,8 @@ public:
         const Eigen::Vector3d lo = a.cwiseMin(b), hi = a.cwiseMax(b);
         for (const Index3& cell : voxels)
             for (std::uint32_t t : cells_.at(cell)) {
-                const auto& box = boxes_[t];
-                if ((box.first.array() > hi.array()).any() || (box.second.array() < lo.array()).any()) continue; // boxes apart
+                const auto [box_lo, box_hi] = box(t);
+                if ((box_lo.array() > hi.array()).any() || (box_hi.array() < lo.array()).any()) continue; // boxes apart
                 const auto& f = surface_.triangles[t];
                 const Eigen::Vector3d &p = surface_.vertices[std::size_t(f[0])], &q = surface_.vertices[std::size_t(f[1])], &r = surface_.vertices[std::size_t(f[2])];
                 const double t_hit = internal::line_meets_triangle(a, d, p, q, r, 1e-9);
@@ -82,7 +81,7 @@ public:
                     for (std::uint32_t t : cells_.at({c[0] + dx, c[1] + dy, c[2] + dz})) {
                         // Most triangles in the 27 cells lie beyond the radius: their boxes tell, before the
                         // closest point (which was most of the pass over the vertices).
-                        const auto& [lo, hi] = boxes_[t];
+                        const auto [lo, hi] = box(t);
                         if ((p.cwiseMax(lo).cwiseMin(hi) - p).squaredNorm() >= best * best) continue;
                         const auto& f = surface_.triangles[t];
                         const Eigen::Vector3d x = internal::closest_on_triangle(p, surface_.vertices[std::size_t(f[0])], surface_.vertices[std::size_t(f[1])], surface_.vertices[std::size_t(f[2])]);
@@ -100,7 +99,13 @@ private:
     const TriangleMesh& surface_;
     CellBuckets cells_;
     CoarseMarks near_; ///< the cells within one of a triangle's
-    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> boxes_; ///< each triangle's bounding box, world units
+    /// Triangle t's bounding box, world units: worked out where asked, as a list of them (2.8 MiB for the bunny at
+    /// 256) cost more in fresh pages than the few multiplies.
+    std::pair<Eigen::Vector3d, Eigen::Vector3d> box(std::size_t t) const {
+        const auto& f = surface_.triangles[t];
+        const Eigen::Vector3d &a = surface_.vertices[std::size_t(f[0])], &b = surface_.vertices[std::size_t(f[1])], &c = surface_.vertices[std::size_t(f[2])];
+        return {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)};
+    }
 };
 
 /// A set of cells, a bit each, in 8^3 blocks kept where one of their cells is in it.
