@@ -866,25 +866,34 @@ TriangleMesh restore_features(TriangleMesh mesh, const SparseVoxmap& voxmap, con
     };
     // The cells where something changes, each once (a moved vertex's six triangles share one or two).
     constexpr std::uint64_t kNone = ~std::uint64_t(0);
-    std::vector<std::uint64_t> changed(looked.size());
+    std::vector<std::uint64_t> changed(looked.size()), slid(looked.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, looked.size(), 4096), [&](const auto& range) {
         for (std::size_t k = range.begin(); k != range.end(); ++k) {
             const auto& t = mesh.triangles[looked[k]];
             Eigen::Vector3d reference = Eigen::Vector3d::Zero();
-            bool moved = false;
-            for (const auto v : t) reference += normal_at(std::size_t(v)), moved |= (flags[std::size_t(v)] & kMoved) != 0;
-            changed[k] = moved || faces_against(mesh.vertices, t, reference) ? cell_key(home_cell(t)) : kNone;
+            bool moved = false, projected = false;
+            for (const auto v : t)
+                reference += normal_at(std::size_t(v)), moved |= (flags[std::size_t(v)] & kMoved) != 0, projected |= (flags[std::size_t(v)] & kProjected) != 0;
+            const bool against = faces_against(mesh.vertices, t, reference);
+            changed[k] = projected || against ? cell_key(home_cell(t)) : kNone;
+            slid[k] = moved && !projected && !against ? cell_key(home_cell(t)) : kNone;
         }
     });
     for (const std::uint64_t key : candidate_cells) changed.push_back(key);
     for (const auto& [key, f] : in_cells) changed.push_back(cell_key(home_cell(mesh.triangles[f])));
-    tbb::parallel_sort(changed.begin(), changed.end());
-    changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
-    if (!changed.empty() && changed.back() == kNone) changed.pop_back();
     CellSet region_cells(voxmap);
-    for (const std::uint64_t key : changed) {
-        const Index3 c = key_cell(key);
-        region_cells.insert({c[0] - kReach, c[1] - kReach, c[2] - kReach}, {c[0] + kReach, c[1] + kReach, c[2] + kReach});
+    // A cell whose vertices only slid along their grid edges (onto the feature surface) changes in the builds only
+    // where uncross puts one back along its edge: its triangles stay in it, and the triangles sharing those
+    // vertices lie in the cells beside it. One cell around it is enough; the rest (fans, splits, unfolding, vertices
+    // drawn off their grid edges) reach kReach.
+    for (auto [list, reach] : {std::pair{&changed, kReach}, std::pair{&slid, std::int64_t(1)}}) {
+        tbb::parallel_sort(list->begin(), list->end());
+        list->erase(std::unique(list->begin(), list->end()), list->end());
+        if (!list->empty() && list->back() == kNone) list->pop_back();
+        for (const std::uint64_t key : *list) {
+            const Index3 c = key_cell(key);
+            region_cells.insert({c[0] - reach, c[1] - reach, c[2] - reach}, {c[0] + reach, c[1] + reach, c[2] + reach});
+        }
     }
     // Each triangle's home cell lies in its block (a cell beyond, where its corners are all on one face).
     const auto region_triangles_runs = runs_where([&](const Index3& c) { return region_cells.any({c[0] - 1, c[1] - 1, c[2] - 1}, {c[0] + kBlockCells, c[1] + kBlockCells, c[2] + kBlockCells}); }).second;
