@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <unordered_map>
 
@@ -137,8 +138,10 @@ public:
     std::int64_t of(std::int32_t a, std::int32_t b) const {
         const std::uint64_t e = directed(a, b);
         if (const auto it = entered_.find(e); it != entered_.end()) return holds(it->second, a, b) ? std::int64_t(it->second) : -1;
-        const auto it = std::lower_bound(start_.begin(), start_.end(), std::pair(e, std::uint32_t(0)));
-        return it != start_.end() && it->first == e && holds(it->second, a, b) ? std::int64_t(it->second) : -1;
+        // The last entered, as the map's was (a closed mesh holds each directed edge once).
+        auto it = std::upper_bound(start_.begin(), start_.end(), std::pair(e, std::numeric_limits<std::uint32_t>::max()));
+        if (it == start_.begin() || (--it)->first != e) return -1;
+        return holds(it->second, a, b) ? std::int64_t(it->second) : -1;
     }
 
 private:
