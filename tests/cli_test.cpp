@@ -326,8 +326,7 @@ TEST_F(Cli, RemeshWithoutSnappingKeepsAcuteTips) {
         for (int trial = 0; trial < 6; ++trial) {
             const double a = angle(rng), b = angle(rng), c = angle(rng); // drawn in this order, on any compiler
             SCOPED_TRACE("at " + std::to_string(resolution) + ", turn " + std::to_string(trial));
-            const Eigen::Matrix3d turn = (Eigen::AngleAxisd(a, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b, Eigen::Vector3d::UnitX()) *
-                                          Eigen::AngleAxisd(c, Eigen::Vector3d::UnitY())).toRotationMatrix();
+            const Eigen::Matrix3d turn = test::turn_zxy(a, b, c);
             TriangleMesh tetrahedron = test::tetrahedron_mesh();
             for (auto& p : tetrahedron.vertices) p = turn * p;
             write_mesh(tetrahedron, file("tetrahedron.obj"));

@@ -212,22 +212,14 @@ TEST(Snap, TurnedPolyhedraFoldNoMoreOnceSnapped) {
     // Triangles facing against the shape, the 24 shapes at 32 voxels (RoundTrip.PolyhedraKeepTheirEdges' shapes,
     // other turns): measured 1 snapped against 3 extracted; with snapping, 2-5 in other draws of turns at 24-48
     // voxels (the L block's notch, the acute prism's and the tetrahedron's edges: #24 wants none).
-    const std::vector<std::pair<std::string, TriangleMesh>> shapes{
-        {"hexagonal prism", test::prism_mesh(test::regular_polygon(6), 0.8)},
-        {"24-gon prism", test::prism_mesh(test::regular_polygon(24), 1.0)},
-        {"octahedron", test::octahedron_mesh()},
-        {"L block", test::prism_mesh({{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}, 0.7)},
-        {"triangular prism", test::prism_mesh(test::regular_polygon(3), 1.2)},
-        {"tetrahedron", test::tetrahedron_mesh()},
-    };
+    const std::vector<std::pair<std::string, TriangleMesh>> shapes = test::sharp_polyhedra();
     std::mt19937 rng(5);
     std::uniform_real_distribution<double> angle(0, 2 * std::numbers::pi);
     std::size_t snapped_facing = 0, plain_facing = 0;
     for (const auto& [name, shape] : shapes)
         for (int trial = 0; trial < 4; ++trial) {
             const double a = angle(rng), b = angle(rng), c = angle(rng); // drawn in this order, on any compiler
-            const Eigen::Matrix3d R = (Eigen::AngleAxisd(a, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b, Eigen::Vector3d::UnitX()) *
-                                       Eigen::AngleAxisd(c, Eigen::Vector3d::UnitY())).toRotationMatrix();
+            const Eigen::Matrix3d R = test::turn_zxy(a, b, c);
             SCOPED_TRACE(name + ", turn " + std::to_string(trial));
             TriangleMesh input = shape;
             for (auto& p : input.vertices) p = R * p;

@@ -116,6 +116,26 @@ inline TriangleMesh octahedron_mesh() {
     return m;
 }
 
+/// Sharp shapes with their names, as the feature mesher's tests turn them off the grid: obtuse edges (a hexagonal
+/// prism), a curved edge (a 24-gon prism's rims), corners where four faces meet (an octahedron), a concave edge (an
+/// L-shaped block), and acute ones (a triangular prism, a tetrahedron).
+inline std::vector<std::pair<std::string, TriangleMesh>> sharp_polyhedra() {
+    return {
+        {"hexagonal prism", prism_mesh(regular_polygon(6), 0.8)},
+        {"24-gon prism", prism_mesh(regular_polygon(24), 1.0)},
+        {"octahedron", octahedron_mesh()},
+        {"L block", prism_mesh({{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}, 0.7)},
+        {"triangular prism", prism_mesh(regular_polygon(3), 1.2)},
+        {"tetrahedron", tetrahedron_mesh()},
+    };
+}
+
+/// A turn by a radians about z, then b about x, then c about y (applied to a point: y first).
+inline Eigen::Matrix3d turn_zxy(double a, double b, double c) {
+    return (Eigen::AngleAxisd(a, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b, Eigen::Vector3d::UnitX()) * Eigen::AngleAxisd(c, Eigen::Vector3d::UnitY()))
+        .toRotationMatrix();
+}
+
 /// Axis-aligned box [lo, hi], each face an n x n grid of quads split into triangles, outward oriented.
 inline TriangleMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n) {
     TriangleMesh m;

@@ -393,11 +393,7 @@ Sharpness sharpness(const TurnedCube& cube, const TriangleMesh& out, double h) {
 }
 
 /// A turn by a degrees about z, then b about x, then c about y (applied to a point: y first).
-Eigen::Matrix3d turn(double a, double b, double c) {
-    return (Eigen::AngleAxisd(a * M_PI / 180, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(b * M_PI / 180, Eigen::Vector3d::UnitX()) *
-            Eigen::AngleAxisd(c * M_PI / 180, Eigen::Vector3d::UnitY()))
-        .toRotationMatrix();
-}
+Eigen::Matrix3d turn(double a, double b, double c) { return test::turn_zxy(a * M_PI / 180, b * M_PI / 180, c * M_PI / 180); }
 
 /// "27.0/38.0": turns about the axes, in degrees, for messages.
 std::string degrees(std::initializer_list<double> angles) {
@@ -472,14 +468,7 @@ TEST(RoundTrip, PolyhedraKeepTheirEdges) {
     // where voxelizing loses them. The feature mesher must keep marching cubes' topology, put no vertex further
     // from the surface than marching cubes does, and bring the shape's sharp edges (all of them, from its faces)
     // closer to the output.
-    const std::vector<std::pair<std::string, TriangleMesh>> shapes{
-        {"hexagonal prism", test::prism_mesh(test::regular_polygon(6), 0.8)},
-        {"24-gon prism", test::prism_mesh(test::regular_polygon(24), 1.0)},
-        {"octahedron", test::octahedron_mesh()},
-        {"L block", test::prism_mesh({{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}, 0.7)},
-        {"triangular prism", test::prism_mesh(test::regular_polygon(3), 1.2)},
-        {"tetrahedron", test::tetrahedron_mesh()},
-    };
+    const std::vector<std::pair<std::string, TriangleMesh>> shapes = test::sharp_polyhedra();
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> angle(0, 360);
     std::size_t facing = 0; // triangles facing against their shape, all turns of all shapes

@@ -114,10 +114,10 @@ std::int32_t third(const Triangle& t, std::int32_t a, std::int32_t b) {
 }
 
 /// Which triangle holds each directed edge, among the triangles with a corner marked in `near` (by vertex; those
-/// past its end unmarked), and with `both_ends` only the edges whose two ends are marked. A triangle about to
-/// change is left, and entered again once changed. The edges at the start are a sorted list, and those entered
-/// since a small map; an answer is checked against the triangle's corners, so a triangle left needs no erasing (a
-/// hash map of every edge, a node each, cost the bunny ear edit at 256 5-14 ms a build).
+/// past its end unmarked), and with `both_ends` only the edges whose two ends are marked. A triangle changed is
+/// entered again. The edges at the start are a sorted list, and those entered since a small map; an answer is
+/// checked against the triangle's corners, so what a changed triangle held before needs no erasing (a hash map of
+/// every edge, a node each, cost the bunny ear edit at 256 5-14 ms a build).
 class EdgeHolders {
 public:
     EdgeHolders(const std::vector<Triangle>& triangles, const std::vector<std::uint8_t>& near, bool both_ends)
@@ -133,7 +133,6 @@ public:
     void enter(std::uint32_t i) {
         each_edge(i, [&](std::uint64_t e) { entered_[e] = i; });
     }
-    void leave(std::uint32_t) {} // what it held is no longer asked about: of() checks the holder's corners
     /// The triangle holding a -> b, or -1 when none is known.
     std::int64_t of(std::int32_t a, std::int32_t b) const {
         const std::uint64_t e = directed(a, b);
@@ -255,7 +254,6 @@ void split_across_sharp_edges(std::vector<Eigen::Vector3d>& vertices, std::vecto
         }
         made_splits.push_back({m, a, b});
         taken[cell_of(point)].push_back(m);
-        holders.leave(t1), holders.leave(t2);
         triangles[t1] = made[0], triangles[t2] = made[2];
         triangles.push_back(made[1]), triangles.push_back(made[3]);
         for (auto t : {t1, t2, std::uint32_t(triangles.size() - 2), std::uint32_t(triangles.size() - 1)}) holders.enter(t);
@@ -294,7 +292,6 @@ std::vector<std::uint32_t> unfold(std::vector<Eigen::Vector3d>& vertices, std::v
             if (m.isZero()) continue;
             if (!(area_normal(vertices, T2).dot(m) > 0 && area_normal(vertices, U2).dot(m) > 0)) continue;
             if (folded(T2) || folded(U2)) continue;
-            holders.leave(f), holders.leave(u);
             triangles[f] = T2, triangles[u] = U2;
             holders.enter(f), holders.enter(u);
             rewritten.push_back(f), rewritten.push_back(u);
